@@ -1,0 +1,50 @@
+#pragma once
+// Rigid and similarity transforms. Names say what they map: cam_from_world maps a
+// point in world coordinates to camera coordinates (COLMAP's pose convention).
+
+#include <Eigen/Core>
+#include <Eigen/Geometry>
+
+namespace loopsfm {
+
+struct Rigid3d {
+  Eigen::Quaterniond rotation = Eigen::Quaterniond::Identity();
+  Eigen::Vector3d translation = Eigen::Vector3d::Zero();
+
+  Rigid3d() = default;
+  Rigid3d(const Eigen::Quaterniond& r, const Eigen::Vector3d& t) : rotation(r), translation(t) {}
+
+  Eigen::Matrix<double, 3, 4> ToMatrix() const {
+    Eigen::Matrix<double, 3, 4> m;
+    m.leftCols<3>() = rotation.toRotationMatrix();
+    m.col(3) = translation;
+    return m;
+  }
+  Rigid3d Inverse() const {
+    const Eigen::Quaterniond inv = rotation.inverse();
+    return Rigid3d(inv, -(inv * translation));
+  }
+  Eigen::Vector3d operator*(const Eigen::Vector3d& x) const { return rotation * x + translation; }
+  // Composition: (c_from_b * b_from_a) maps a to c.
+  Rigid3d operator*(const Rigid3d& b_from_a) const {
+    return Rigid3d((rotation * b_from_a.rotation).normalized(),
+                   rotation * b_from_a.translation + translation);
+  }
+};
+
+struct Sim3d {
+  double scale = 1.0;
+  Eigen::Quaterniond rotation = Eigen::Quaterniond::Identity();
+  Eigen::Vector3d translation = Eigen::Vector3d::Zero();
+
+  Eigen::Vector3d operator*(const Eigen::Vector3d& x) const {
+    return scale * (rotation * x) + translation;
+  }
+};
+
+// Angle of a rotation in degrees, in [0, 180].
+inline double RotationAngleDegrees(const Eigen::Quaterniond& q) {
+  return Eigen::AngleAxisd(q.normalized()).angle() * 180.0 / M_PI;
+}
+
+}  // namespace loopsfm

@@ -1,0 +1,60 @@
+#include "loopsfm/scene/camera.h"
+
+#include <algorithm>
+
+#include "loopsfm/util/errors.h"
+
+namespace loopsfm {
+
+Camera Camera::GuessFromImageSize(int width, int height) {
+  Camera camera;
+  camera.model_id = CameraModelId::kPinhole;
+  camera.width = width;
+  camera.height = height;
+  const double focal = 1.2 * std::max(width, height);
+  camera.params = {focal, focal, width / 2.0, height / 2.0};
+  camera.has_prior_focal_length = false;
+  return camera;
+}
+
+double Camera::MeanFocalLength() const {
+  return VisitCameraModel(model_id, [&](auto model) {
+    using Model = decltype(model);
+    return Model::kNumFocal == 1 ? params[0] : 0.5 * (params[0] + params[1]);
+  });
+}
+
+Eigen::Vector2d Camera::CamFromImg(const Eigen::Vector2d& pixel) const {
+  return VisitCameraModel(model_id, [&](auto model) {
+    return decltype(model)::CamFromImg(params.data(), pixel.x(), pixel.y());
+  });
+}
+
+Eigen::Vector2d Camera::ImgFromCam(const Eigen::Vector3d& p) const {
+  return VisitCameraModel(model_id, [&](auto model) {
+    Eigen::Vector2d xy;
+    decltype(model)::ImgFromCam(params.data(), p.x(), p.y(), p.z(), &xy.x(), &xy.y());
+    return xy;
+  });
+}
+
+void Camera::Check() const {
+  if (width <= 0 || height <= 0) {
+    throw InputError(fmt::format("camera has invalid size {}x{}; width and height must be positive",
+                                 width, height));
+  }
+  const int expected = CameraModelNumParams(model_id);
+  if (static_cast<int>(params.size()) != expected) {
+    throw InputError(fmt::format("camera model {} takes {} parameters ({}), got {}", ModelName(),
+                                 expected,
+                                 VisitCameraModel(model_id, [](auto m) {
+                                   return decltype(m)::kParamsInfo;
+                                 }),
+                                 params.size()));
+  }
+  if (MeanFocalLength() <= 0) {
+    throw InputError(fmt::format("camera focal length must be positive, got {}", MeanFocalLength()));
+  }
+}
+
+}  // namespace loopsfm

@@ -1,0 +1,44 @@
+#pragma once
+// A camera: intrinsic model and parameters, shared by all frames taken with it.
+
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "loopsfm/sensor/camera_models.h"
+#include "loopsfm/util/types.h"
+
+namespace loopsfm {
+
+struct Camera {
+  camera_t camera_id = kInvalidCameraId;
+  CameraModelId model_id = CameraModelId::kPinhole;
+  int width = 0;
+  int height = 0;
+  // In the model's order (see kParamsInfo), COLMAP's pixel convention.
+  std::vector<double> params;
+  // True when the focal length came from the user or calibration, not from a guess.
+  bool has_prior_focal_length = false;
+
+  // PINHOLE camera with the focal length guessed as 1.2 * max(width, height) (as COLMAP
+  // does for images without EXIF) and the principal point at the image centre.
+  static Camera GuessFromImageSize(int width, int height);
+
+  std::string ModelName() const { return std::string(CameraModelName(model_id)); }
+  double MeanFocalLength() const;
+  // Normalised image-plane coordinates (z = 1) of a pixel.
+  Eigen::Vector2d CamFromImg(const Eigen::Vector2d& pixel) const;
+  // Pixel of a point in camera coordinates (z > 0 expected).
+  Eigen::Vector2d ImgFromCam(const Eigen::Vector3d& point_in_cam) const;
+  // Converts a pixel threshold to a threshold on normalised coordinates.
+  double CamFromImgThreshold(double pixels) const { return pixels / MeanFocalLength(); }
+  // Throws InputError when the parameter count does not fit the model or sizes are invalid.
+  void Check() const;
+  bool SameIntrinsics(const Camera& other) const {
+    return model_id == other.model_id && width == other.width && height == other.height &&
+           params == other.params;
+  }
+};
+
+}  // namespace loopsfm

@@ -1,0 +1,14 @@
+#pragma once
+// Logging through spdlog. Library code logs with spdlog::info/warn/debug; the CLI picks
+// the level from --verbose / --quiet.
+
+#include <spdlog/spdlog.h>
+
+namespace loopsfm {
+
+enum class Verbosity { kQuiet, kNormal, kVerbose };
+
+// Sends log lines to stderr with a short "[level] message" pattern.
+void SetupLogging(Verbosity verbosity);
+
+}  // namespace loopsfm
