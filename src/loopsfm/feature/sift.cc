@@ -1,0 +1,101 @@
+#include "loopsfm/feature/sift.h"
+
+#include <algorithm>
+#include <numeric>
+
+#include <opencv2/features2d.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include "loopsfm/util/errors.h"
+
+namespace loopsfm {
+
+void SiftOptions::Check() const {
+  LOOPSFM_REQUIRE_OPTION(max_features > 0, "--max-features must be positive, got {}", max_features);
+  LOOPSFM_REQUIRE_OPTION(contrast_threshold > 0, "SIFT contrast threshold must be positive, got {}",
+                         contrast_threshold);
+  LOOPSFM_REQUIRE_OPTION(edge_threshold > 0, "SIFT edge threshold must be positive, got {}",
+                         edge_threshold);
+  LOOPSFM_REQUIRE_OPTION(num_octave_layers >= 1, "SIFT octave layers must be at least 1, got {}",
+                         num_octave_layers);
+  LOOPSFM_REQUIRE_OPTION(upscale >= 1.0 && upscale <= 4.0,
+                         "--upscale must be between 1 and 4, got {}", upscale);
+}
+
+FeatureDescriptors QuantizeDescriptors(const cv::Mat& float_descriptors, bool root_sift) {
+  LOOPSFM_CHECK(float_descriptors.empty() || float_descriptors.cols == kDescriptorDim);
+  FeatureDescriptors out(float_descriptors.rows, kDescriptorDim);
+  for (int r = 0; r < float_descriptors.rows; ++r) {
+    const float* in = float_descriptors.ptr<float>(r);
+    std::array<float, kDescriptorDim> v;
+    if (root_sift) {
+      const float l1 = std::accumulate(in, in + kDescriptorDim, 0.0f,
+                                       [](float s, float x) { return s + std::abs(x); });
+      for (int i = 0; i < kDescriptorDim; ++i) v[i] = std::sqrt(std::abs(in[i]) / std::max(l1, 1e-12f));
+    } else {
+      float l2 = 0;
+      for (int i = 0; i < kDescriptorDim; ++i) l2 += in[i] * in[i];
+      l2 = std::sqrt(std::max(l2, 1e-24f));
+      for (int i = 0; i < kDescriptorDim; ++i) v[i] = in[i] / l2;
+    }
+    for (int i = 0; i < kDescriptorDim; ++i) {
+      out(r, i) = static_cast<uint8_t>(std::min(255.0f, std::round(512.0f * v[i])));
+    }
+  }
+  return out;
+}
+
+FeatureSet ExtractSift(const cv::Mat& image, const SiftOptions& options,
+                       std::vector<Eigen::Matrix<uint8_t, 3, 1>>* colors) {
+  cv::Mat grey;
+  if (image.channels() == 3) {
+    cv::cvtColor(image, grey, cv::COLOR_BGR2GRAY);
+  } else {
+    grey = image;
+  }
+  if (options.upscale != 1.0) {
+    cv::resize(grey, grey, cv::Size(), options.upscale, options.upscale, cv::INTER_CUBIC);
+  }
+  // nfeatures = 0: detect all, then keep the strongest ourselves (OpenCV's own cap keeps
+  // ties unpredictably and recomputes orientations).
+  auto sift = cv::SIFT::create(0, options.num_octave_layers, options.contrast_threshold,
+                               options.edge_threshold);
+  std::vector<cv::KeyPoint> keypoints;
+  sift->detect(grey, keypoints);
+  if (static_cast<int>(keypoints.size()) > options.max_features) {
+    std::stable_sort(keypoints.begin(), keypoints.end(),
+                     [](const cv::KeyPoint& a, const cv::KeyPoint& b) {
+                       return a.response > b.response;
+                     });
+    keypoints.resize(options.max_features);
+  }
+  cv::Mat descriptors;
+  sift->compute(grey, keypoints, descriptors);
+
+  FeatureSet features;
+  features.keypoints.reserve(keypoints.size());
+  const float inv_scale = static_cast<float>(1.0 / options.upscale);
+  for (const cv::KeyPoint& kp : keypoints) {
+    // OpenCV puts pixel centres on integers, COLMAP at +0.5; size is the diameter.
+    // OpenCV's angle is in degrees, clockwise in image coordinates (y down).
+    const float x = (kp.pt.x + 0.5f) * inv_scale;
+    const float y = (kp.pt.y + 0.5f) * inv_scale;
+    const float orientation = kp.angle * static_cast<float>(M_PI / 180.0);
+    features.keypoints.push_back(
+        FeatureKeypoint::FromScaleOrientation(x, y, 0.5f * kp.size * inv_scale, orientation));
+  }
+  features.descriptors = QuantizeDescriptors(descriptors, options.root_sift);
+  if (colors && image.channels() == 3) {
+    colors->clear();
+    colors->reserve(features.keypoints.size());
+    for (const auto& kp : features.keypoints) {
+      const int col = std::clamp(static_cast<int>(kp.x), 0, image.cols - 1);
+      const int row = std::clamp(static_cast<int>(kp.y), 0, image.rows - 1);
+      const cv::Vec3b bgr = image.at<cv::Vec3b>(row, col);
+      colors->emplace_back(bgr[2], bgr[1], bgr[0]);
+    }
+  }
+  return features;
+}
+
+}  // namespace loopsfm

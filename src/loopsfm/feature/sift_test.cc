@@ -1,0 +1,91 @@
+#include "loopsfm/feature/sift.h"
+
+#include <gtest/gtest.h>
+
+#include <opencv2/imgproc.hpp>
+
+#include "loopsfm/util/errors.h"
+
+namespace loopsfm {
+namespace {
+
+// Smoothed noise with blobs at many scales: a good SIFT test pattern.
+cv::Mat Texture(int width, int height) {
+  cv::Mat acc = cv::Mat::zeros(height, width, CV_32F);
+  cv::RNG rng(7);
+  for (int cell : {4, 8, 16, 32}) {
+    cv::Mat small(height / cell + 2, width / cell + 2, CV_32F);
+    rng.fill(small, cv::RNG::UNIFORM, 0.0f, 1.0f);
+    cv::Mat up;
+    cv::resize(small, up, cv::Size(small.cols * cell, small.rows * cell), 0, 0, cv::INTER_CUBIC);
+    acc += up(cv::Rect(0, 0, width, height));
+  }
+  cv::Mat out;
+  cv::normalize(acc, acc, 0, 255, cv::NORM_MINMAX);
+  acc.convertTo(out, CV_8U);
+  cv::cvtColor(out, out, cv::COLOR_GRAY2BGR);
+  return out;
+}
+
+TEST(Sift, KeypointsFollowColmapPixelConventionAndShiftWithTheImage) {
+  const cv::Mat image = Texture(320, 240);
+  SiftOptions options;
+  const FeatureSet a = ExtractSift(image, options);
+  ASSERT_GT(a.Size(), 100u);
+  EXPECT_EQ(a.descriptors.rows(), static_cast<long>(a.Size()));
+  // Shift by exactly 10 px: matched keypoints must move by 10 px.
+  cv::Mat shifted;
+  const cv::Mat m = (cv::Mat_<double>(2, 3) << 1, 0, 10, 0, 1, 0);
+  cv::warpAffine(image, shifted, m, image.size(), cv::INTER_NEAREST, cv::BORDER_REFLECT);
+  const FeatureSet b = ExtractSift(shifted, options);
+  int agree = 0, checked = 0;
+  for (size_t i = 0; i < a.Size(); ++i) {
+    const auto& kp = a.keypoints[i];
+    if (kp.x < 30 || kp.x > 280 || kp.y < 20 || kp.y > 220) continue;
+    ++checked;
+    for (const auto& other : b.keypoints) {
+      if (std::abs(other.x - kp.x - 10) < 0.05 && std::abs(other.y - kp.y) < 0.05) {
+        ++agree;
+        break;
+      }
+    }
+  }
+  EXPECT_GT(agree, 0.8 * checked);
+}
+
+TEST(Sift, MaxFeaturesKeepsTheStrongest) {
+  SiftOptions options;
+  options.max_features = 50;
+  const FeatureSet features = ExtractSift(Texture(320, 240), options);
+  EXPECT_EQ(features.Size(), 50u);
+}
+
+TEST(Sift, RootSiftDescriptorsHaveUnitNormBeforeQuantisation) {
+  cv::Mat d(1, 128, CV_32F);
+  cv::RNG(3).fill(d, cv::RNG::UNIFORM, 0.0f, 100.0f);
+  for (bool root : {false, true}) {
+    const FeatureDescriptors q = QuantizeDescriptors(d, root);
+    const double norm = q.row(0).cast<double>().norm() / 512.0;
+    EXPECT_NEAR(norm, 1.0, 0.02) << "root_sift=" << root;
+  }
+}
+
+TEST(Sift, UpscaleMapsKeypointsBackToOriginalPixels) {
+  const cv::Mat image = Texture(200, 160);
+  SiftOptions options;
+  options.upscale = 2.0;
+  std::vector<Eigen::Matrix<uint8_t, 3, 1>> colors;
+  const FeatureSet features = ExtractSift(image, options, &colors);
+  ASSERT_GT(features.Size(), 50u);
+  ASSERT_EQ(colors.size(), features.Size());
+  for (const auto& kp : features.keypoints) {
+    EXPECT_GE(kp.x, 0.0f);
+    EXPECT_LE(kp.x, 200.0f);
+    EXPECT_LE(kp.y, 160.0f);
+  }
+  options.upscale = 0.5;
+  EXPECT_THROW(options.Check(), InvalidArgument);
+}
+
+}  // namespace
+}  // namespace loopsfm
