@@ -1,0 +1,23 @@
+#pragma once
+// Flags shared by all subcommands and helpers the commands share.
+
+#include <string>
+
+#include "loopsfm/storage/database.h"
+
+namespace loopsfm::cli {
+
+struct CommonFlags {
+  // Worker threads (0: all cores).
+  int threads = 0;
+  bool verbose = false;
+  bool quiet = false;
+};
+// The global flags, parsed once by main() before any subcommand callback runs.
+CommonFlags& Common();
+
+// Opens a database that a previous stage created; InputError naming the stage to run when
+// it does not exist (instead of silently creating an empty one).
+Database OpenExistingDatabase(const std::string& path);
+
+}  // namespace loopsfm::cli

@@ -1,0 +1,33 @@
+#include "loopsfm/cli/commands.h"
+#include "loopsfm/cli/stage_flags.h"
+#include "loopsfm/util/logging.h"
+
+namespace loopsfm::cli {
+
+void AddExtractCommand(CLI::App& app) {
+  struct Flags {
+    std::string input, database;
+    ExtractFlags extract;
+  };
+  auto flags = std::make_shared<Flags>();
+  CLI::App* cmd = app.add_subcommand(
+      "extract", "Decode frames, pick keyframes, extract SIFT features into a database");
+  cmd->add_option("input", flags->input, "Video file (mp4, mov, mkv, avi) or folder of images")
+      ->required();
+  cmd->add_option("-d,--database", flags->database, "Database file (created if missing)")
+      ->required();
+  AddExtractFlags(cmd, &flags->extract);
+  cmd->callback([flags] {
+    const ExtractOptions options = flags->extract.Resolve();
+    Database database = Database::Open(flags->database);
+    const ExtractReport report = ExtractFeatures(flags->input, database, options);
+    spdlog::info(
+        "extract: {} frames ({} new, {} already stored), {} unreadable skipped, {} camera(s), "
+        "{:.0f} features/frame, {:.1f} frames/s, {:.1f} s",
+        report.frames_decoded, report.frames_extracted, report.frames_resumed,
+        report.unreadable_images, report.num_cameras, report.FeaturesPerFrame(),
+        report.FramesPerSecond(), report.seconds);
+  });
+}
+
+}  // namespace loopsfm::cli

@@ -1,0 +1,50 @@
+// loopsfm: camera path and sparse 3D structure from video.
+
+#include <cstdio>
+
+#include <CLI/CLI.hpp>
+
+#include "loopsfm/cli/commands.h"
+#include "loopsfm/util/errors.h"
+#include "loopsfm/util/logging.h"
+
+int main(int argc, char** argv) {
+  using namespace loopsfm;
+  CLI::App app{"loopsfm: camera poses and a sparse point cloud from video, with loop closing"};
+  app.require_subcommand(1);
+  app.set_version_flag("--version", "loopsfm 0.1.0");
+  auto& common = cli::Common();
+  app.add_option("--threads", common.threads, "Worker threads (0: all cores)")->capture_default_str();
+  app.add_flag("-v,--verbose", common.verbose, "More log output");
+  app.add_flag("-q,--quiet", common.quiet, "Only warnings and errors");
+  app.parse_complete_callback([&] {
+    SetupLogging(common.quiet ? Verbosity::kQuiet
+                              : common.verbose ? Verbosity::kVerbose : Verbosity::kNormal);
+  });
+
+  cli::AddReconstructCommand(app);
+  cli::AddEvalCommand(app);
+  cli::AddExtractCommand(app);
+  cli::AddMatchCommand(app);
+  cli::AddTracksCommand(app);
+  cli::AddSynthCommand(app);
+
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::Success& e) {
+    return app.exit(e);
+  } catch (const CLI::ParseError& e) {
+    app.exit(e);
+    return 2;
+  } catch (const Cancelled& e) {
+    std::fprintf(stderr, "loopsfm: stopped: %s\n", e.what());
+    return 130;
+  } catch (const Error& e) {
+    std::fprintf(stderr, "loopsfm: error: %s\n", e.what());
+    return 2;
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "loopsfm: unexpected error: %s\n", e.what());
+    return 1;
+  }
+  return 0;
+}

@@ -1,0 +1,62 @@
+#include <fmt/format.h>
+
+#include "loopsfm/cli/commands.h"
+#include "loopsfm/cli/stage_flags.h"
+#include "loopsfm/pipeline/match.h"
+#include "loopsfm/util/logging.h"
+
+namespace loopsfm::cli {
+namespace {
+
+void LogTrackReport(const TrackBuildReport& report) {
+  std::string histogram;
+  for (const auto& [length, count] : report.length_histogram) {
+    histogram += fmt::format(" {}:{}", length, count);
+  }
+  spdlog::info("tracks: {} (mean length {:.2f}), {} conflicting removed; length histogram{}",
+               report.num_tracks, report.mean_track_length, report.num_conflicting_tracks,
+               histogram);
+}
+
+}  // namespace
+
+void AddMatchCommand(CLI::App& app) {
+  struct Flags {
+    std::string database;
+    MatchFlags match;
+  };
+  auto flags = std::make_shared<Flags>();
+  CLI::App* cmd =
+      app.add_subcommand("match", "Match frame pairs and verify their two-view geometry");
+  cmd->add_option("-d,--database", flags->database, "Database written by `loopsfm extract`")
+      ->required();
+  AddMatchFlags(cmd, &flags->match);
+  cmd->callback([flags] {
+    const MatchOptions options = flags->match.Resolve();
+    Database database = OpenExistingDatabase(flags->database);
+    const MatchReport report = MatchPairs(database, options);
+    spdlog::info(
+        "match ({}): {} pairs ({} already stored), {} matched now, {} verified, {:.0f} mean "
+        "inliers; median {:.1f} ms matching + {:.1f} ms verification per pair; {:.1f} s",
+        PairStrategyName(options.strategy), report.num_pairs, report.num_pairs_resumed,
+        report.num_pairs_matched, report.num_pairs_verified, report.MeanInliers(),
+        report.median_match_ms, report.median_verify_ms, report.seconds);
+    TrackBuildReport tracks;
+    BuildTracksFromDatabase(database, {}, &tracks);
+    LogTrackReport(tracks);
+  });
+}
+
+void AddTracksCommand(CLI::App& app) {
+  auto database_path = std::make_shared<std::string>();
+  CLI::App* cmd = app.add_subcommand("tracks", "Build tracks from the verified matches and report");
+  cmd->add_option("-d,--database", *database_path, "Database with verified matches")->required();
+  cmd->callback([database_path] {
+    Database database = OpenExistingDatabase(*database_path);
+    TrackBuildReport report;
+    BuildTracksFromDatabase(database, {}, &report);
+    LogTrackReport(report);
+  });
+}
+
+}  // namespace loopsfm::cli

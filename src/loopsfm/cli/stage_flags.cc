@@ -1,0 +1,62 @@
+#include "loopsfm/cli/stage_flags.h"
+
+#include "loopsfm/cli/common.h"
+#include "loopsfm/scene/dataset_files.h"
+
+namespace loopsfm::cli {
+
+void AddExtractFlags(CLI::App* cmd, ExtractFlags* flags) {
+  cmd->add_option("--intrinsics", flags->intrinsics,
+                  "Camera file: 'PINHOLE w h fx fy cx cy' or 'OPENCV w h fx fy cx cy k1 k2 p1 p2'");
+  cmd->add_option("--every", flags->options.keyframes.every,
+                  "Keep one frame in N (the sharpest of each window)")
+      ->capture_default_str();
+  cmd->add_flag("--first-of-window", flags->first_of_window,
+                "With --every, keep the first frame of each window instead of the sharpest");
+  cmd->add_option("--upscale", flags->options.sift.upscale,
+                  "Upscale frames by this factor before SIFT (low-resolution video)")
+      ->capture_default_str();
+  cmd->add_option("--max-features", flags->options.sift.max_features, "Most features per frame")
+      ->capture_default_str();
+  cmd->add_flag("--no-root-sift", flags->no_root_sift, "Plain L2-normalised SIFT descriptors");
+}
+
+ExtractOptions ExtractFlags::Resolve() const {
+  ExtractOptions resolved = options;
+  resolved.keyframes.sharpest = !first_of_window;
+  resolved.sift.root_sift = !no_root_sift;
+  resolved.num_threads = Common().threads;
+  resolved.show_progress = !Common().quiet;
+  if (!intrinsics.empty()) resolved.intrinsics = ReadIntrinsicsFile(intrinsics);
+  resolved.Check();
+  return resolved;
+}
+
+void AddMatchFlags(CLI::App* cmd, MatchFlags* flags) {
+  cmd->add_option("--pairs", flags->pairs, "Pairing strategy: exhaustive | sequential (default)");
+  cmd->add_option("--overlap", flags->options.sequential.overlap,
+                  "Sequential: match each frame with this many previous frames")
+      ->capture_default_str();
+  cmd->add_option("--ratio", flags->options.matcher.max_ratio,
+                  "Lowe's ratio test threshold (0.8 default; 0.7 and 0.5 are stricter)")
+      ->capture_default_str();
+  cmd->add_flag("--mutual", flags->mutual, "Keep only mutual nearest neighbours");
+  cmd->add_option("--max-error", flags->options.verification.max_error,
+                  "RANSAC inlier threshold in pixels")
+      ->capture_default_str();
+  cmd->add_option("--min-inliers", flags->options.verification.min_num_inliers,
+                  "Reject pairs with fewer inliers")
+      ->capture_default_str();
+}
+
+MatchOptions MatchFlags::Resolve() const {
+  MatchOptions resolved = options;
+  resolved.strategy = ParsePairStrategy(pairs.empty() ? "sequential" : pairs);
+  if (mutual) resolved.matcher.cross_check = true;
+  resolved.num_threads = Common().threads;
+  resolved.show_progress = !Common().quiet;
+  resolved.Check();
+  return resolved;
+}
+
+}  // namespace loopsfm::cli

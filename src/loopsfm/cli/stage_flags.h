@@ -1,0 +1,33 @@
+#pragma once
+// Flags of the extract and match stages, shared by `extract`, `match` and `reconstruct`.
+
+#include <optional>
+#include <string>
+
+#include <CLI/CLI.hpp>
+
+#include "loopsfm/pipeline/extract.h"
+#include "loopsfm/pipeline/match.h"
+
+namespace loopsfm::cli {
+
+struct ExtractFlags {
+  std::string intrinsics;
+  ExtractOptions options;
+  bool first_of_window = false;
+  bool no_root_sift = false;
+  // Options with the flags applied (reads the intrinsics file).
+  ExtractOptions Resolve() const;
+};
+void AddExtractFlags(CLI::App* cmd, ExtractFlags* flags);
+
+struct MatchFlags {
+  // Empty: the default for the input (sequential).
+  std::string pairs;
+  MatchOptions options;
+  bool mutual = false;
+  MatchOptions Resolve() const;
+};
+void AddMatchFlags(CLI::App* cmd, MatchFlags* flags);
+
+}  // namespace loopsfm::cli

@@ -1,0 +1,422 @@
+#include "loopsfm/estimators/bundle_adjustment.h"
+
+#include <algorithm>
+#include <cmath>
+#include <optional>
+#include <thread>
+
+#include "loopsfm/estimators/cost_functions/reprojection_error.h"
+#include "loopsfm/util/errors.h"
+
+namespace loopsfm {
+namespace {
+
+template <typename Set>
+std::vector<typename Set::value_type> Sorted(const Set& set) {
+  std::vector<typename Set::value_type> values(set.begin(), set.end());
+  std::sort(values.begin(), values.end());
+  return values;
+}
+
+ceres::LossFunction* CreateLossFunction(BundleLossFunction type, double scale) {
+  switch (type) {
+    case BundleLossFunction::kTrivial: return nullptr;
+    case BundleLossFunction::kHuber: return new ceres::HuberLoss(scale);
+    case BundleLossFunction::kSoftL1: return new ceres::SoftLOneLoss(scale);
+    case BundleLossFunction::kCauchy: return new ceres::CauchyLoss(scale);
+  }
+  return nullptr;
+}
+
+// Indices of the camera parameters held fixed under the refine_* options.
+std::vector<int> ConstantCameraParams(CameraModelId model_id,
+                                      const BundleAdjustmentOptions& options) {
+  return VisitCameraModel(model_id, [&](auto model) {
+    using Model = decltype(model);
+    std::vector<int> constant;
+    for (int i = 0; i < Model::kNumParams; ++i) {
+      const bool is_focal = i < Model::kNumFocal;
+      const bool is_pp = !is_focal && i < Model::kNumFocalAndPP;
+      const bool is_extra = i >= Model::kNumFocalAndPP;
+      if ((is_focal && !options.refine_focal_length) ||
+          (is_pp && !options.refine_principal_point) ||
+          (is_extra && !options.refine_extra_params)) {
+        constant.push_back(i);
+      }
+    }
+    return constant;
+  });
+}
+
+std::optional<ceres::SparseLinearAlgebraLibraryType> AvailableSparseLibrary() {
+  for (const auto type : {ceres::SUITE_SPARSE, ceres::EIGEN_SPARSE, ceres::CX_SPARSE}) {
+    if (ceres::IsSparseLinearAlgebraLibraryTypeAvailable(type)) return type;
+  }
+  return std::nullopt;
+}
+
+}  // namespace
+
+BundleAdjustmentOptions BundleAdjustmentOptions::Local() {
+  BundleAdjustmentOptions options;
+  options.max_num_iterations = 25;
+  return options;
+}
+
+BundleAdjustmentOptions BundleAdjustmentOptions::Global() {
+  BundleAdjustmentOptions options;
+  options.max_num_iterations = 100;
+  return options;
+}
+
+void BundleAdjustmentOptions::Check() const {
+  LOOPSFM_REQUIRE_OPTION(loss_function_scale > 0.0,
+                         "bundle adjustment: loss_function_scale must be > 0 (got {})",
+                         loss_function_scale);
+  LOOPSFM_REQUIRE_OPTION(max_num_iterations >= 0,
+                         "bundle adjustment: max_num_iterations must be >= 0 (got {})",
+                         max_num_iterations);
+  LOOPSFM_REQUIRE_OPTION(
+      function_tolerance >= 0.0 && gradient_tolerance >= 0.0 && parameter_tolerance >= 0.0,
+      "bundle adjustment: tolerances must be >= 0");
+  LOOPSFM_REQUIRE_OPTION(max_linear_solver_iterations >= 1,
+                         "bundle adjustment: max_linear_solver_iterations must be >= 1 (got {})",
+                         max_linear_solver_iterations);
+  LOOPSFM_REQUIRE_OPTION(
+      dense_schur_max_num_images >= 0 && sparse_schur_max_num_images >= dense_schur_max_num_images,
+      "bundle adjustment: need 0 <= dense_schur_max_num_images <= sparse_schur_max_num_images "
+      "(got {} and {})",
+      dense_schur_max_num_images, sparse_schur_max_num_images);
+}
+
+void BundleAdjustmentConfig::RemoveImage(image_t image_id) {
+  image_ids_.erase(image_id);
+  constant_poses_.erase(image_id);
+  constant_translation_.erase(image_id);
+}
+
+void BundleAdjustmentConfig::SetConstantTranslationCoords(image_t image_id,
+                                                          std::vector<int> coords) {
+  std::sort(coords.begin(), coords.end());
+  coords.erase(std::unique(coords.begin(), coords.end()), coords.end());
+  for (const int c : coords) LOOPSFM_CHECK_MSG(c >= 0 && c < 3, "translation coord {}", c);
+  constant_translation_[image_id] = std::move(coords);
+}
+
+const std::vector<int>* BundleAdjustmentConfig::ConstantTranslationCoords(image_t image_id) const {
+  const auto it = constant_translation_.find(image_id);
+  return it == constant_translation_.end() ? nullptr : &it->second;
+}
+
+void BundleAdjustmentConfig::AddVariablePoint(point3D_t point3D_id) {
+  constant_points_.erase(point3D_id);
+  variable_points_.insert(point3D_id);
+}
+
+void BundleAdjustmentConfig::AddConstantPoint(point3D_t point3D_id) {
+  variable_points_.erase(point3D_id);
+  constant_points_.insert(point3D_id);
+}
+
+void FixGaugeWithTwoImages(const Reconstruction& reconstruction, image_t first_image_id,
+                           image_t second_image_id, BundleAdjustmentConfig* config) {
+  LOOPSFM_CHECK(first_image_id != second_image_id);
+  const Image& first = reconstruction.GetImage(first_image_id);
+  const Image& second = reconstruction.GetImage(second_image_id);
+  // With the first pose fixed, the remaining gauge freedom is a scaling about the first
+  // centre C1, which moves the second translation along (cam2_from_world * C1).
+  const Eigen::Vector3d direction = second.cam_from_world * first.ProjectionCenter();
+  int coord = 0;
+  direction.cwiseAbs().maxCoeff(&coord);
+  config->SetConstantPose(first_image_id);
+  config->SetConstantTranslationCoords(second_image_id, {coord});
+}
+
+BundleAdjuster::BundleAdjuster(const BundleAdjustmentOptions& options,
+                               const BundleAdjustmentConfig& config)
+    : options_(options), config_(config) {
+  options_.Check();
+}
+
+BundleAdjuster::~BundleAdjuster() = default;
+
+ceres::Problem& BundleAdjuster::problem() {
+  LOOPSFM_CHECK_MSG(problem_ != nullptr, "BundleAdjuster::SetUp must be called first");
+  return *problem_;
+}
+
+void BundleAdjuster::SetUp(Reconstruction* reconstruction) {
+  LOOPSFM_CHECK_MSG(problem_ == nullptr, "BundleAdjuster::SetUp called twice");
+  LOOPSFM_CHECK(reconstruction != nullptr);
+  reconstruction_ = reconstruction;
+  ceres::Problem::Options problem_options;
+  // Parameter blocks are never removed, so the slow-removal index is not needed, and
+  // cost functions, losses and manifolds are owned by the problem.
+  problem_options.enable_fast_removal = false;
+  problem_ = std::make_unique<ceres::Problem>(problem_options);
+  loss_function_ = CreateLossFunction(options_.loss_function, options_.loss_function_scale);
+
+  const std::vector<image_t> image_ids = Sorted(config_.ImageIds());
+  for (const image_t image_id : image_ids) AddImage(image_id);
+
+  // Points seen by the config's images, and those the config adds explicitly, enter with
+  // their observations by the other registered images (poses constant there).
+  std::unordered_set<point3D_t> variable_points;
+  for (const point3D_t id : points_added_) {
+    if (!config_.HasConstantPoint(id)) variable_points.insert(id);
+  }
+  for (const point3D_t id : config_.VariablePoints()) {
+    if (reconstruction_->ExistsPoint3D(id)) variable_points.insert(id);
+  }
+  for (const point3D_t id : Sorted(variable_points)) AddPoint(id, /*constant=*/false);
+  for (const point3D_t id : Sorted(points_added_)) {
+    if (config_.HasConstantPoint(id)) {
+      problem_->SetParameterBlockConstant(reconstruction_->GetPoint3D(id).xyz.data());
+    }
+  }
+  ParameterizeCameras();
+  // The problem owns only the losses its residual blocks use.
+  if (report_.num_reprojection_residual_blocks == 0) {
+    delete loss_function_;
+    loss_function_ = nullptr;
+  }
+}
+
+void BundleAdjuster::AddPoseBlocks(image_t image_id) {
+  if (pose_blocks_.count(image_id) > 0) return;
+  pose_blocks_.insert(image_id);
+  Image& image = reconstruction_->GetImage(image_id);
+  image.cam_from_world.rotation.normalize();
+  double* rotation = image.cam_from_world.rotation.coeffs().data();
+  double* translation = image.cam_from_world.translation.data();
+  problem_->AddParameterBlock(rotation, 4, new ceres::EigenQuaternionManifold());
+  problem_->AddParameterBlock(translation, 3);
+  if (config_.HasConstantPose(image_id)) {
+    problem_->SetParameterBlockConstant(rotation);
+    problem_->SetParameterBlockConstant(translation);
+    return;
+  }
+  if (const std::vector<int>* coords = config_.ConstantTranslationCoords(image_id)) {
+    if (coords->size() == 3) {
+      problem_->SetParameterBlockConstant(translation);
+    } else if (!coords->empty()) {
+      problem_->SetManifold(translation, new ceres::SubsetManifold(3, *coords));
+    }
+  }
+}
+
+void BundleAdjuster::AddImage(image_t image_id) {
+  Image& image = reconstruction_->GetImage(image_id);
+  LOOPSFM_CHECK_MSG(image.registered, "bundle adjustment: image {} is not registered", image_id);
+  Camera& camera = reconstruction_->GetCamera(image.camera_id);
+  LOOPSFM_CHECK_EQ(static_cast<int>(camera.params.size()), CameraModelNumParams(camera.model_id));
+  config_cameras_.insert(image.camera_id);
+  cameras_added_.insert(image.camera_id);
+
+  const bool constant_pose = config_.HasConstantPose(image_id);
+  if (!constant_pose) AddPoseBlocks(image_id);
+  double* rotation = image.cam_from_world.rotation.coeffs().data();
+  double* translation = image.cam_from_world.translation.data();
+
+  for (const Point2D& point2D : image.points2D) {
+    if (!point2D.HasPoint3D()) continue;
+    Point3D& point = reconstruction_->GetPoint3D(point2D.point3D_id);
+    points_added_.insert(point2D.point3D_id);
+    if (constant_pose) {
+      problem_->AddResidualBlock(CreateReprojectionErrorConstantPoseCost(
+                                     camera.model_id, image.cam_from_world, point2D.xy),
+                                 loss_function_, point.xyz.data(), camera.params.data());
+    } else {
+      problem_->AddResidualBlock(CreateReprojectionErrorCost(camera.model_id, point2D.xy),
+                                 loss_function_, rotation, translation, point.xyz.data(),
+                                 camera.params.data());
+    }
+    ++report_.num_reprojection_residual_blocks;
+  }
+}
+
+void BundleAdjuster::AddPoint(point3D_t point3D_id, bool constant) {
+  Point3D& point = reconstruction_->GetPoint3D(point3D_id);
+  points_added_.insert(point3D_id);
+  for (const TrackElement& element : point.track.elements) {
+    if (config_.HasImage(element.image_id)) continue;  // added with its image
+    const Image& image = reconstruction_->GetImage(element.image_id);
+    if (!image.registered) continue;
+    Camera& camera = reconstruction_->GetCamera(image.camera_id);
+    LOOPSFM_CHECK_EQ(static_cast<int>(camera.params.size()), CameraModelNumParams(camera.model_id));
+    cameras_added_.insert(image.camera_id);
+    problem_->AddResidualBlock(
+        CreateReprojectionErrorConstantPoseCost(camera.model_id, image.cam_from_world,
+                                                image.points2D.at(element.point2D_idx).xy),
+        loss_function_, point.xyz.data(), camera.params.data());
+    ++report_.num_reprojection_residual_blocks;
+  }
+  if (constant) problem_->SetParameterBlockConstant(point.xyz.data());
+}
+
+void BundleAdjuster::ParameterizeCameras() {
+  for (const camera_t camera_id : Sorted(cameras_added_)) {
+    Camera& camera = reconstruction_->GetCamera(camera_id);
+    double* params = camera.params.data();
+    if (!problem_->HasParameterBlock(params)) continue;
+    const std::vector<int> constant = ConstantCameraParams(camera.model_id, options_);
+    const bool all_constant =
+        static_cast<int>(constant.size()) == problem_->ParameterBlockSize(params);
+    if (config_cameras_.count(camera_id) == 0 || config_.HasConstantCamera(camera_id) ||
+        all_constant) {
+      problem_->SetParameterBlockConstant(params);
+    } else if (!constant.empty()) {
+      problem_->SetManifold(
+          params, new ceres::SubsetManifold(static_cast<int>(camera.params.size()), constant));
+    }
+  }
+}
+
+bool BundleAdjuster::HasPoseBlocks(image_t image_id) const {
+  return pose_blocks_.count(image_id) > 0;
+}
+
+double* BundleAdjuster::PoseRotationBlock(image_t image_id) {
+  LOOPSFM_CHECK_MSG(problem_ != nullptr, "BundleAdjuster::SetUp must be called first");
+  AddPoseBlocks(image_id);
+  return reconstruction_->GetImage(image_id).cam_from_world.rotation.coeffs().data();
+}
+
+double* BundleAdjuster::PoseTranslationBlock(image_t image_id) {
+  LOOPSFM_CHECK_MSG(problem_ != nullptr, "BundleAdjuster::SetUp must be called first");
+  AddPoseBlocks(image_id);
+  return reconstruction_->GetImage(image_id).cam_from_world.translation.data();
+}
+
+double* BundleAdjuster::PointBlock(point3D_t point3D_id) {
+  LOOPSFM_CHECK_MSG(problem_ != nullptr, "BundleAdjuster::SetUp must be called first");
+  double* xyz = reconstruction_->GetPoint3D(point3D_id).xyz.data();
+  if (!problem_->HasParameterBlock(xyz)) {
+    problem_->AddParameterBlock(xyz, 3);
+    points_added_.insert(point3D_id);
+    if (config_.HasConstantPoint(point3D_id)) problem_->SetParameterBlockConstant(xyz);
+  }
+  return xyz;
+}
+
+double* BundleAdjuster::CameraBlock(camera_t camera_id) {
+  LOOPSFM_CHECK_MSG(problem_ != nullptr, "BundleAdjuster::SetUp must be called first");
+  Camera& camera = reconstruction_->GetCamera(camera_id);
+  double* params = camera.params.data();
+  if (!problem_->HasParameterBlock(params)) {
+    problem_->AddParameterBlock(params, static_cast<int>(camera.params.size()));
+    problem_->SetParameterBlockConstant(params);
+  }
+  return params;
+}
+
+void BundleAdjuster::ConfigureSolver(ceres::Solver::Options* solver_options) {
+  int num_variable_images = 0;
+  for (const image_t image_id : pose_blocks_) {
+    const double* rotation =
+        reconstruction_->GetImage(image_id).cam_from_world.rotation.coeffs().data();
+    const double* translation =
+        reconstruction_->GetImage(image_id).cam_from_world.translation.data();
+    if (!problem_->IsParameterBlockConstant(rotation) ||
+        !problem_->IsParameterBlockConstant(translation)) {
+      ++num_variable_images;
+    }
+  }
+  report_.num_variable_images = num_variable_images;
+
+  const auto sparse_library = AvailableSparseLibrary();
+  BundleLinearSolver choice = options_.linear_solver;
+  if (choice == BundleLinearSolver::kAuto) {
+    if (num_variable_images <= options_.dense_schur_max_num_images) {
+      choice = BundleLinearSolver::kDenseSchur;
+    } else if (num_variable_images <= options_.sparse_schur_max_num_images && sparse_library) {
+      choice = BundleLinearSolver::kSparseSchur;
+    } else {
+      choice = BundleLinearSolver::kIterativeSchur;
+    }
+  }
+  if (choice == BundleLinearSolver::kSparseSchur && !sparse_library) {
+    choice = BundleLinearSolver::kIterativeSchur;
+  }
+  switch (choice) {
+    case BundleLinearSolver::kAuto:
+    case BundleLinearSolver::kDenseSchur:
+      solver_options->linear_solver_type = ceres::DENSE_SCHUR;
+      break;
+    case BundleLinearSolver::kSparseSchur:
+      solver_options->linear_solver_type = ceres::SPARSE_SCHUR;
+      solver_options->sparse_linear_algebra_library_type = *sparse_library;
+      break;
+    case BundleLinearSolver::kIterativeSchur:
+      solver_options->linear_solver_type = ceres::ITERATIVE_SCHUR;
+      solver_options->preconditioner_type = ceres::SCHUR_JACOBI;
+      break;
+  }
+  // Without points there is nothing to eliminate (pose graphs): plain sparse Cholesky.
+  if (points_added_.empty()) {
+    if (sparse_library) {
+      solver_options->linear_solver_type = ceres::SPARSE_NORMAL_CHOLESKY;
+      solver_options->sparse_linear_algebra_library_type = *sparse_library;
+    } else {
+      solver_options->linear_solver_type = ceres::DENSE_QR;
+    }
+  }
+
+  solver_options->max_num_iterations = options_.max_num_iterations;
+  solver_options->max_linear_solver_iterations = options_.max_linear_solver_iterations;
+  solver_options->function_tolerance = options_.function_tolerance;
+  solver_options->gradient_tolerance = options_.gradient_tolerance;
+  solver_options->parameter_tolerance = options_.parameter_tolerance;
+  const int threads = options_.num_threads > 0
+                          ? options_.num_threads
+                          : std::max(1, static_cast<int>(std::thread::hardware_concurrency()));
+  solver_options->num_threads = threads;
+  solver_options->minimizer_progress_to_stdout = options_.print_progress;
+  solver_options->logging_type =
+      options_.print_progress ? ceres::PER_MINIMIZER_ITERATION : ceres::SILENT;
+}
+
+bool BundleAdjuster::Solve(Reconstruction* reconstruction) {
+  if (problem_ == nullptr) SetUp(reconstruction);
+  LOOPSFM_CHECK_MSG(reconstruction == reconstruction_,
+                    "BundleAdjuster::Solve: not the reconstruction given to SetUp");
+  report_.success = false;
+  report_.num_residual_blocks = problem_->NumResidualBlocks();
+  report_.num_residuals = problem_->NumResiduals();
+  if (problem_->NumResidualBlocks() == 0) {
+    report_.termination = "no residuals";
+    return false;
+  }
+
+  ceres::Solver::Options solver_options;
+  ConfigureSolver(&solver_options);
+  ceres::Solve(solver_options, problem_.get(), &summary_);
+
+  for (const image_t image_id : pose_blocks_) {
+    reconstruction_->GetImage(image_id).cam_from_world.rotation.normalize();
+  }
+  report_.num_variable_points = 0;
+  for (const point3D_t id : points_added_) {
+    const double* xyz = reconstruction_->GetPoint3D(id).xyz.data();
+    if (problem_->HasParameterBlock(xyz) && !problem_->IsParameterBlockConstant(xyz)) {
+      ++report_.num_variable_points;
+    }
+  }
+  report_.num_variable_cameras = 0;
+  for (const camera_t id : cameras_added_) {
+    const double* params = reconstruction_->GetCamera(id).params.data();
+    if (problem_->HasParameterBlock(params) && !problem_->IsParameterBlockConstant(params)) {
+      ++report_.num_variable_cameras;
+    }
+  }
+  report_.success = summary_.IsSolutionUsable();
+  report_.initial_cost = summary_.initial_cost;
+  report_.final_cost = summary_.final_cost;
+  report_.num_iterations = summary_.num_successful_steps + summary_.num_unsuccessful_steps;
+  report_.linear_solver = ceres::LinearSolverTypeToString(summary_.linear_solver_type_used);
+  report_.termination = ceres::TerminationTypeToString(summary_.termination_type);
+  report_.time_s = summary_.total_time_in_seconds;
+  return report_.success;
+}
+
+}  // namespace loopsfm

@@ -1,0 +1,224 @@
+#include "loopsfm/matching/descriptor_matcher.h"
+
+#include <algorithm>
+#include <cstdint>
+#include <cstring>
+#include <limits>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "loopsfm/util/errors.h"
+
+namespace loopsfm {
+namespace {
+
+using RowMatrixXf = Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
+
+constexpr float kInf = std::numeric_limits<float>::infinity();
+// The running best-2 of a row is kept per lane (column index modulo kLanes), so the scan over
+// a row of dot products vectorises; the lanes are merged once per row.
+constexpr int kLanes = 16;
+// GEMM tile: kRowBlock x kColBlock dot products (1 MB) stay in L2 while they are scanned.
+constexpr int kRowBlock = 256;
+constexpr int kColBlock = 1024;
+static_assert(kColBlock % kLanes == 0);
+
+// Float copies of uint8 descriptors, rows padded with zeros to a multiple of `pad`; padded
+// rows get an infinite squared norm so that they are never anyone's neighbour.
+struct FloatDescriptors {
+  RowMatrixXf values;
+  std::vector<float> sq_norms;
+  int num = 0;
+};
+
+FloatDescriptors ToFloat(const FeatureDescriptors& descriptors, int pad) {
+  FloatDescriptors f;
+  f.num = static_cast<int>(descriptors.rows());
+  const int padded = (f.num + pad - 1) / pad * pad;
+  f.values.setZero(padded, kDescriptorDim);
+  f.values.topRows(f.num) = descriptors.cast<float>();
+  f.sq_norms.assign(padded, kInf);
+  for (int i = 0; i < f.num; ++i) f.sq_norms[i] = f.values.row(i).squaredNorm();
+  return f;
+}
+
+// Best and second-best squared distance and the best index, per row or per column.
+struct Best2 {
+  std::vector<float> d1, d2;
+  std::vector<int32_t> idx;
+  void Init(size_t n) {
+    d1.assign(n, kInf);
+    d2.assign(n, kInf);
+    idx.assign(n, -1);
+  }
+};
+
+// Updates the best-2 of one row (per lane) and of every column with one tile row of dot
+// products. Ties keep the lowest index, as a sequential search would. The lanes are GCC / Clang
+// vector-extension types, compiled to one AVX-512 register or two AVX2 ones (or SSE), so the
+// row's best-2 stays in registers and each step is a few compare-and-select instructions.
+template <bool kColumns>
+inline void ScanTileRow(const float* __restrict dots, int num_cols, float a2,
+                        const float* __restrict b2, int32_t row_index, int32_t col_offset,
+                        float* __restrict lane_d1, float* __restrict lane_d2,
+                        int32_t* __restrict lane_idx, float* __restrict c1,
+                        float* __restrict c2, int32_t* __restrict ci) {
+  using FloatLanes = float __attribute__((vector_size(kLanes * sizeof(float))));
+  using IntLanes = int32_t __attribute__((vector_size(kLanes * sizeof(int32_t))));
+  FloatLanes l1, l2;
+  IntLanes li;
+  std::memcpy(&l1, lane_d1, sizeof(l1));
+  std::memcpy(&l2, lane_d2, sizeof(l2));
+  std::memcpy(&li, lane_idx, sizeof(li));
+  IntLanes col_index;
+  for (int l = 0; l < kLanes; ++l) col_index[l] = col_offset + l;
+  for (int c = 0; c < num_cols; c += kLanes) {
+    FloatLanes dot, b;
+    std::memcpy(&dot, dots + c, sizeof(dot));
+    std::memcpy(&b, b2 + c, sizeof(b));
+    const FloatLanes d = a2 + b - 2.0f * dot;
+    const IntLanes lt = d < l1;
+    l2 = lt ? l1 : (d < l2 ? d : l2);
+    li = lt ? col_index : li;
+    l1 = lt ? d : l1;
+    col_index += kLanes;
+    if constexpr (kColumns) {
+      FloatLanes cb1, cb2;
+      IntLanes cbi;
+      std::memcpy(&cb1, c1 + c, sizeof(cb1));
+      std::memcpy(&cb2, c2 + c, sizeof(cb2));
+      std::memcpy(&cbi, ci + c, sizeof(cbi));
+      const IntLanes clt = d < cb1;
+      cb2 = clt ? cb1 : (d < cb2 ? d : cb2);
+      cbi = clt ? IntLanes{} + row_index : cbi;
+      cb1 = clt ? d : cb1;
+      std::memcpy(c1 + c, &cb1, sizeof(cb1));
+      std::memcpy(c2 + c, &cb2, sizeof(cb2));
+      std::memcpy(ci + c, &cbi, sizeof(cbi));
+    }
+  }
+  std::memcpy(lane_d1, &l1, sizeof(l1));
+  std::memcpy(lane_d2, &l2, sizeof(l2));
+  std::memcpy(lane_idx, &li, sizeof(li));
+}
+
+// Exact best-2 search in both directions (columns only when kColumns) by blocked GEMM.
+template <bool kColumns>
+void SearchBest2(const FloatDescriptors& f1, const FloatDescriptors& f2, Best2* rows,
+                 Best2* cols) {
+  const int n1 = f1.num;
+  const int n2_padded = static_cast<int>(f2.values.rows());
+  rows->Init(n1);
+  if (kColumns) cols->Init(n2_padded);
+  std::vector<float> tile(static_cast<size_t>(kRowBlock) * kColBlock);
+  std::vector<float> lane_d1(static_cast<size_t>(kRowBlock) * kLanes);
+  std::vector<float> lane_d2(lane_d1.size());
+  std::vector<int32_t> lane_idx(lane_d1.size());
+
+  for (int r0 = 0; r0 < n1; r0 += kRowBlock) {
+    const int num_rows = std::min(kRowBlock, n1 - r0);
+    std::fill(lane_d1.begin(), lane_d1.end(), kInf);
+    std::fill(lane_d2.begin(), lane_d2.end(), kInf);
+    std::fill(lane_idx.begin(), lane_idx.end(), -1);
+    for (int c0 = 0; c0 < n2_padded; c0 += kColBlock) {
+      const int num_cols = std::min(kColBlock, n2_padded - c0);
+      Eigen::Map<RowMatrixXf> dots(tile.data(), num_rows, num_cols);
+      dots.noalias() =
+          f1.values.middleRows(r0, num_rows) * f2.values.middleRows(c0, num_cols).transpose();
+      for (int r = 0; r < num_rows; ++r) {
+        ScanTileRow<kColumns>(tile.data() + static_cast<size_t>(r) * num_cols, num_cols,
+                              f1.sq_norms[r0 + r], f2.sq_norms.data() + c0, r0 + r, c0,
+                              lane_d1.data() + r * kLanes, lane_d2.data() + r * kLanes,
+                              lane_idx.data() + r * kLanes,
+                              kColumns ? cols->d1.data() + c0 : nullptr,
+                              kColumns ? cols->d2.data() + c0 : nullptr,
+                              kColumns ? cols->idx.data() + c0 : nullptr);
+      }
+    }
+    // Merge the lanes of each row into its best-2.
+    for (int r = 0; r < num_rows; ++r) {
+      float b1 = kInf, b2 = kInf;
+      int32_t bi = -1;
+      for (int l = 0; l < kLanes; ++l) {
+        const float d = lane_d1[r * kLanes + l];
+        const int32_t i = lane_idx[r * kLanes + l];
+        if (i >= 0 && (d < b1 || (d == b1 && i < bi))) {
+          b2 = std::min(b2, b1);
+          b1 = d;
+          bi = i;
+        } else {
+          b2 = std::min(b2, d);
+        }
+        b2 = std::min(b2, lane_d2[r * kLanes + l]);
+      }
+      rows->d1[r0 + r] = b1;
+      rows->d2[r0 + r] = b2;
+      rows->idx[r0 + r] = bi;
+    }
+  }
+}
+
+}  // namespace
+
+void DescriptorMatchingOptions::Check() const {
+  LOOPSFM_REQUIRE_OPTION(max_ratio > 0.0 && max_ratio <= 1.0,
+                         "matching max_ratio must be in (0, 1], got {}", max_ratio);
+  LOOPSFM_REQUIRE_OPTION(max_distance > 0.0,
+                         "matching max_distance must be positive (2 disables it), got {}",
+                         max_distance);
+}
+
+NearestNeighbors FindNearestNeighbors(const FeatureDescriptors& descriptors1,
+                                      const FeatureDescriptors& descriptors2) {
+  NearestNeighbors nn;
+  const size_t n1 = descriptors1.rows();
+  if (descriptors2.rows() == 0) {
+    nn.index.assign(n1, -1);
+    nn.best_distance.assign(n1, kInf);
+    nn.second_distance.assign(n1, kInf);
+    return nn;
+  }
+  Best2 rows;
+  SearchBest2<false>(ToFloat(descriptors1, 1), ToFloat(descriptors2, kLanes), &rows, nullptr);
+  nn.index.assign(rows.idx.begin(), rows.idx.end());
+  nn.best_distance = std::move(rows.d1);
+  nn.second_distance = std::move(rows.d2);
+  return nn;
+}
+
+FeatureMatches MatchDescriptors(const FeatureDescriptors& descriptors1,
+                                const FeatureDescriptors& descriptors2,
+                                const DescriptorMatchingOptions& options) {
+  options.Check();
+  FeatureMatches matches;
+  if (descriptors1.rows() == 0 || descriptors2.rows() == 0) return matches;
+  const FloatDescriptors f1 = ToFloat(descriptors1, 1);
+  const FloatDescriptors f2 = ToFloat(descriptors2, kLanes);
+  Best2 rows, cols;
+  if (options.cross_check) {
+    SearchBest2<true>(f1, f2, &rows, &cols);
+  } else {
+    SearchBest2<false>(f1, f2, &rows, nullptr);
+  }
+
+  // Squared distances are in uint8 units: a unit-length descriptor has norm 512.
+  const double max_sq_distance = options.max_distance >= 2.0
+                                     ? std::numeric_limits<double>::infinity()
+                                     : (512.0 * options.max_distance) * (512.0 * options.max_distance);
+  const double sq_ratio = options.max_ratio * options.max_ratio;
+  auto passes = [&](float best, float second) {
+    return best <= max_sq_distance && best < sq_ratio * second;
+  };
+
+  matches.reserve(std::min(f1.num, f2.num));
+  for (int i = 0; i < f1.num; ++i) {
+    const int32_t j = rows.idx[i];
+    if (j < 0 || !passes(rows.d1[i], rows.d2[i])) continue;
+    if (options.cross_check && (cols.idx[j] != i || !passes(cols.d1[j], cols.d2[j]))) continue;
+    matches.push_back({static_cast<point2D_t>(i), static_cast<point2D_t>(j)});
+  }
+  return matches;
+}
+
+}  // namespace loopsfm

@@ -1,0 +1,435 @@
+#include "loopsfm/matching/geometric_verification.h"
+
+#include <algorithm>
+#include <climits>
+#include <cmath>
+#include <vector>
+
+#include <Eigen/Dense>
+#include <opencv2/calib3d.hpp>
+#include <opencv2/core.hpp>
+
+#include "loopsfm/matching/relative_pose_refinement.h"
+#include "loopsfm/util/errors.h"
+
+namespace loopsfm {
+namespace {
+
+// One robustly estimated 3x3 model and its inlier mask over the raw matches.
+struct ModelEstimate {
+  Eigen::Matrix3d model = Eigen::Matrix3d::Zero();
+  std::vector<char> inliers;
+  int num_inliers = 0;
+};
+
+cv::UsacParams MakeUsacParams(const TwoViewVerificationOptions& options, double threshold,
+                              int seed) {
+  cv::UsacParams params;
+  params.confidence = options.confidence;
+  params.isParallel = false;
+  params.loMethod = cv::LOCAL_OPTIM_INNER_LO;
+  params.maxIterations = options.max_num_trials;
+  params.randomGeneratorState = seed;
+  params.sampler = cv::SAMPLING_UNIFORM;
+  params.score = cv::SCORE_METHOD_MSAC;
+  params.threshold = threshold;
+  return params;
+}
+
+// Runs an OpenCV estimator `estimate(mask) -> cv::Mat`; a failure (no model, or an OpenCV
+// exception on degenerate input) gives an estimate with no inliers.
+template <typename Estimator>
+ModelEstimate RunEstimator(size_t num_points, Estimator&& estimate) {
+  ModelEstimate result;
+  cv::Mat mask, model;
+  try {
+    model = estimate(mask);
+  } catch (const cv::Exception&) {
+    return result;
+  }
+  if (model.empty() || model.cols != 3 || model.rows < 3 || mask.total() != num_points) {
+    return result;
+  }
+  model.convertTo(model, CV_64F);
+  for (int r = 0; r < 3; ++r) {
+    for (int c = 0; c < 3; ++c) result.model(r, c) = model.at<double>(r, c);
+  }
+  const cv::Mat mask8 = mask.reshape(1, static_cast<int>(num_points));
+  result.inliers.resize(num_points);
+  for (size_t i = 0; i < num_points; ++i) {
+    result.inliers[i] = mask8.at<uchar>(static_cast<int>(i)) != 0;
+    result.num_inliers += result.inliers[i];
+  }
+  return result;
+}
+
+// The pinhole part of a camera's intrinsics (focal lengths and principal point).
+Eigen::Matrix3d CalibrationMatrix(const Camera& camera) {
+  return VisitCameraModel(camera.model_id, [&](auto model) {
+    using Model = decltype(model);
+    const double* p = camera.params.data();
+    Eigen::Matrix3d K = Eigen::Matrix3d::Identity();
+    if constexpr (Model::kNumFocal == 1) {
+      K(0, 0) = K(1, 1) = p[0];
+      K(0, 2) = p[1];
+      K(1, 2) = p[2];
+    } else {
+      K(0, 0) = p[0];
+      K(1, 1) = p[1];
+      K(0, 2) = p[2];
+      K(1, 2) = p[3];
+    }
+    return K;
+  });
+}
+
+cv::Mat ToCv(const Eigen::Matrix3d& m) {
+  cv::Mat out(3, 3, CV_64F);
+  for (int r = 0; r < 3; ++r) {
+    for (int c = 0; c < 3; ++c) out.at<double>(r, c) = m(r, c);
+  }
+  return out;
+}
+
+Eigen::Matrix3d ToEigen3(const cv::Mat& m) {
+  Eigen::Matrix3d out;
+  for (int r = 0; r < 3; ++r) {
+    for (int c = 0; c < 3; ++c) out(r, c) = m.at<double>(r, c);
+  }
+  return out;
+}
+
+// Cheirality and ray angles of matches of normalised points under cam2_from_cam1: a match
+// counts when the midpoint of its two rays lies in front of both cameras. The angle is between
+// ray 1 and ray 2 rotated into camera 1 (the triangulation angle when the rays meet).
+struct PoseSupport {
+  int num_in_front = 0;
+  double median_angle_deg = 0.0;
+};
+
+PoseSupport EvaluatePose(const Rigid3d& cam2_from_cam1,
+                         const std::vector<Eigen::Vector2d>& points1,
+                         const std::vector<Eigen::Vector2d>& points2) {
+  PoseSupport support;
+  const Eigen::Matrix3d Rt = cam2_from_cam1.rotation.toRotationMatrix().transpose();
+  const Eigen::Vector3d center2 = -Rt * cam2_from_cam1.translation;
+  std::vector<double> angles;
+  angles.reserve(points1.size());
+  for (size_t i = 0; i < points1.size(); ++i) {
+    const Eigen::Vector3d d1 = points1[i].homogeneous();
+    const Eigen::Vector3d d2 = Rt * points2[i].homogeneous();
+    const double a = d1.dot(d1), b = d1.dot(d2), c = d2.dot(d2);
+    angles.push_back(std::acos(std::clamp(b / std::sqrt(a * c), -1.0, 1.0)));
+    const double det = a * c - b * b;
+    if (det <= 1e-12 * a * c) continue;
+    const double e = d1.dot(center2), f = d2.dot(center2);
+    const double depth1 = (c * e - b * f) / det;
+    const double depth2 = (b * e - a * f) / det;
+    if (depth1 > 0 && depth2 > 0) ++support.num_in_front;
+  }
+  if (!angles.empty()) {
+    auto mid = angles.begin() + angles.size() / 2;
+    std::nth_element(angles.begin(), mid, angles.end());
+    support.median_angle_deg = *mid * 180.0 / M_PI;
+  }
+  return support;
+}
+
+Rigid3d MakeRigid(const Eigen::Matrix3d& R, const Eigen::Vector3d& t) {
+  return Rigid3d(Eigen::Quaterniond(R).normalized(), t);
+}
+
+// Relative pose from an essential matrix with OpenCV's cheirality test on normalised points.
+Rigid3d PoseFromEssential(const Eigen::Matrix3d& E, const std::vector<Eigen::Vector2d>& points1,
+                          const std::vector<Eigen::Vector2d>& points2) {
+  std::vector<cv::Point2d> cv_points1, cv_points2;
+  for (size_t i = 0; i < points1.size(); ++i) {
+    cv_points1.emplace_back(points1[i].x(), points1[i].y());
+    cv_points2.emplace_back(points2[i].x(), points2[i].y());
+  }
+  cv::Mat R_cv, t_cv;
+  try {
+    cv::recoverPose(ToCv(E), cv_points1, cv_points2, cv::Mat::eye(3, 3, CV_64F), R_cv, t_cv);
+  } catch (const cv::Exception&) {
+    return Rigid3d();  // degenerate E: identity, zero translation
+  }
+  return MakeRigid(ToEigen3(R_cv),
+                   Eigen::Vector3d(t_cv.at<double>(0), t_cv.at<double>(1), t_cv.at<double>(2)));
+}
+
+// The entries of `points` where mask is set.
+std::vector<Eigen::Vector2d> Select(const std::vector<Eigen::Vector2d>& points,
+                                    const std::vector<char>& mask) {
+  std::vector<Eigen::Vector2d> selected;
+  for (size_t i = 0; i < points.size(); ++i) {
+    if (mask[i]) selected.push_back(points[i]);
+  }
+  return selected;
+}
+
+// Sampson inliers of a fundamental or essential matrix.
+int SelectInliers(const Eigen::Matrix3d& M, const std::vector<Eigen::Vector2d>& points1,
+                  const std::vector<Eigen::Vector2d>& points2, double threshold,
+                  std::vector<char>* mask) {
+  mask->assign(points1.size(), 0);
+  int count = 0;
+  for (size_t i = 0; i < points1.size(); ++i) {
+    (*mask)[i] = SampsonSquaredError(M, points1[i], points2[i]) < threshold * threshold;
+    count += (*mask)[i];
+  }
+  return count;
+}
+
+// The pose of E, polished on the inliers of *mask (normalised points). With reselect, the
+// inliers are then re-selected by Sampson error under the polished E and the pose polished
+// again (at most twice), which is what makes E's inlier count comparable to F's.
+Rigid3d PolishPose(const Eigen::Matrix3d& E, const std::vector<Eigen::Vector2d>& points1,
+                   const std::vector<Eigen::Vector2d>& points2, double threshold, bool reselect,
+                   std::vector<char>* mask) {
+  std::vector<Eigen::Vector2d> inliers1 = Select(points1, *mask);
+  std::vector<Eigen::Vector2d> inliers2 = Select(points2, *mask);
+  Rigid3d pose = RefineRelativePose(inliers1, inliers2, PoseFromEssential(E, inliers1, inliers2),
+                                    threshold);
+  for (int round = 0; reselect && round < 2; ++round) {
+    std::vector<char> reselected;
+    const int count =
+        SelectInliers(EssentialFromPose(pose), points1, points2, threshold, &reselected);
+    if (count < 5 || reselected == *mask) break;
+    *mask = std::move(reselected);
+    inliers1 = Select(points1, *mask);
+    inliers2 = Select(points2, *mask);
+    pose = RefineRelativePose(inliers1, inliers2, pose, threshold);
+  }
+  return pose;
+}
+
+// USAC's F comes from a small inlier sample: refit it by the normalised 8-point algorithm on
+// all inliers and re-select them by Sampson error, while that keeps or adds inliers (at most
+// three rounds). Counts inliers by Sampson error even when nothing is refitted, the measure
+// used for E, so that the two counts compare.
+void PolishFundamental(const std::vector<Eigen::Vector2d>& points1,
+                       const std::vector<Eigen::Vector2d>& points2, double threshold,
+                       ModelEstimate* F) {
+  if (F->inliers.empty()) return;
+  F->num_inliers = SelectInliers(F->model, points1, points2, threshold, &F->inliers);
+  for (int round = 0; round < 3 && F->num_inliers >= 8; ++round) {
+    std::vector<cv::Point2d> inliers1, inliers2;
+    for (size_t i = 0; i < points1.size(); ++i) {
+      if (!F->inliers[i]) continue;
+      inliers1.emplace_back(points1[i].x(), points1[i].y());
+      inliers2.emplace_back(points2[i].x(), points2[i].y());
+    }
+    cv::Mat refit;
+    try {
+      refit = cv::findFundamentalMat(inliers1, inliers2, cv::FM_8POINT);
+    } catch (const cv::Exception&) {
+      return;
+    }
+    if (refit.rows != 3 || refit.cols != 3) return;
+    const Eigen::Matrix3d model = ToEigen3(refit);
+    std::vector<char> mask;
+    const int count = SelectInliers(model, points1, points2, threshold, &mask);
+    if (count < F->num_inliers) return;
+    const bool changed = mask != F->inliers;
+    F->model = model;
+    F->inliers = std::move(mask);
+    F->num_inliers = count;
+    if (!changed) return;
+  }
+}
+
+// The decomposition of a homography between normalised coordinates with the most matches in
+// front of both cameras; t is translation over plane distance (0 for a pure rotation).
+Rigid3d PoseFromHomography(const Eigen::Matrix3d& H_normalized,
+                           const std::vector<Eigen::Vector2d>& points1,
+                           const std::vector<Eigen::Vector2d>& points2) {
+  std::vector<cv::Mat> rotations, translations, normals;
+  cv::decomposeHomographyMat(ToCv(H_normalized), cv::Mat::eye(3, 3, CV_64F), rotations,
+                             translations, normals);
+  int best_support = -1;
+  Rigid3d best;
+  for (size_t k = 0; k < rotations.size(); ++k) {
+    const Rigid3d pose = MakeRigid(
+        ToEigen3(rotations[k]), Eigen::Vector3d(translations[k].at<double>(0),
+                                                translations[k].at<double>(1),
+                                                translations[k].at<double>(2)));
+    const int support = EvaluatePose(pose, points1, points2).num_in_front;
+    if (support > best_support) {
+      best_support = support;
+      best = pose;
+    }
+  }
+  return best;
+}
+
+}  // namespace
+
+void TwoViewVerificationOptions::Check() const {
+  LOOPSFM_REQUIRE_OPTION(max_error > 0, "verification max_error must be positive, got {}",
+                         max_error);
+  LOOPSFM_REQUIRE_OPTION(confidence > 0 && confidence < 1,
+                         "verification confidence must be in (0, 1), got {}", confidence);
+  LOOPSFM_REQUIRE_OPTION(max_num_trials >= 1,
+                         "verification max_num_trials must be at least 1, got {}",
+                         max_num_trials);
+  LOOPSFM_REQUIRE_OPTION(min_num_inliers >= 8,
+                         "verification min_num_inliers must be at least 8, got {}",
+                         min_num_inliers);
+  LOOPSFM_REQUIRE_OPTION(min_inlier_ratio >= 0 && min_inlier_ratio <= 1,
+                         "verification min_inlier_ratio must be in [0, 1], got {}",
+                         min_inlier_ratio);
+  LOOPSFM_REQUIRE_OPTION(min_E_F_inlier_ratio >= 0 && min_E_F_inlier_ratio <= 1,
+                         "verification min_E_F_inlier_ratio must be in [0, 1], got {}",
+                         min_E_F_inlier_ratio);
+  LOOPSFM_REQUIRE_OPTION(max_H_inlier_ratio >= 0 && max_H_inlier_ratio <= 1,
+                         "verification max_H_inlier_ratio must be in [0, 1], got {}",
+                         max_H_inlier_ratio);
+  LOOPSFM_REQUIRE_OPTION(min_planar_tri_angle_deg >= 0,
+                         "verification min_planar_tri_angle_deg must be non-negative, got {}",
+                         min_planar_tri_angle_deg);
+}
+
+TwoViewVerification VerifyTwoViewGeometry(const Camera& camera1,
+                                          const FeatureKeypoints& keypoints1,
+                                          const Camera& camera2,
+                                          const FeatureKeypoints& keypoints2,
+                                          const FeatureMatches& matches,
+                                          const TwoViewVerificationOptions& options,
+                                          Random& random) {
+  options.Check();
+  camera1.Check();
+  camera2.Check();
+  // Seeds are drawn first and always in the same order, so they do not depend on the input.
+  const int seed_F = static_cast<int>(random.UniformInt(0, INT_MAX));
+  const int seed_H = static_cast<int>(random.UniformInt(0, INT_MAX));
+  const int seed_E = static_cast<int>(random.UniformInt(0, INT_MAX));
+
+  TwoViewVerification result;
+  TwoViewGeometry& geometry = result.geometry;
+  geometry.config = TwoViewGeometry::kDegenerate;
+  const size_t n = matches.size();
+  result.num_matches = static_cast<int>(n);
+  for (const FeatureMatch& m : matches) {
+    if (m.point2D_idx1 >= keypoints1.size() || m.point2D_idx2 >= keypoints2.size()) {
+      throw InputError(fmt::format(
+          "match ({}, {}) refers to a keypoint beyond the images' {} and {} keypoints; the "
+          "matches do not belong to these features",
+          m.point2D_idx1, m.point2D_idx2, keypoints1.size(), keypoints2.size()));
+    }
+  }
+  if (n < static_cast<size_t>(options.min_num_inliers)) return result;
+
+  std::vector<cv::Point2d> pixels1(n), pixels2(n);
+  std::vector<Eigen::Vector2d> pixel_points1(n), pixel_points2(n), normalized1(n), normalized2(n);
+  for (size_t i = 0; i < n; ++i) {
+    const FeatureKeypoint& k1 = keypoints1[matches[i].point2D_idx1];
+    const FeatureKeypoint& k2 = keypoints2[matches[i].point2D_idx2];
+    pixels1[i] = {k1.x, k1.y};
+    pixels2[i] = {k2.x, k2.y};
+    pixel_points1[i] = {k1.x, k1.y};
+    pixel_points2[i] = {k2.x, k2.y};
+    normalized1[i] = camera1.CamFromImg(Eigen::Vector2d(k1.x, k1.y));
+    normalized2[i] = camera2.CamFromImg(Eigen::Vector2d(k2.x, k2.y));
+  }
+  const double threshold_normalized =
+      options.max_error / (0.5 * (camera1.MeanFocalLength() + camera2.MeanFocalLength()));
+
+  ModelEstimate F = RunEstimator(n, [&](cv::Mat& mask) {
+    return cv::findFundamentalMat(pixels1, pixels2, mask,
+                                  MakeUsacParams(options, options.max_error, seed_F));
+  });
+  PolishFundamental(pixel_points1, pixel_points2, options.max_error, &F);
+  const ModelEstimate H = RunEstimator(n, [&](cv::Mat& mask) {
+    return cv::findHomography(pixels1, pixels2, mask,
+                              MakeUsacParams(options, options.max_error, seed_H));
+  });
+  const bool calibrated = camera1.has_prior_focal_length && camera2.has_prior_focal_length;
+  ModelEstimate E;
+  Rigid3d calibrated_pose;
+  if (calibrated) {
+    const cv::Mat identity = cv::Mat::eye(3, 3, CV_64F);
+    std::vector<cv::Point2d> cv_normalized1(n), cv_normalized2(n);
+    for (size_t i = 0; i < n; ++i) {
+      cv_normalized1[i] = {normalized1[i].x(), normalized1[i].y()};
+      cv_normalized2[i] = {normalized2[i].x(), normalized2[i].y()};
+    }
+    E = RunEstimator(n, [&](cv::Mat& mask) {
+      return cv::findEssentialMat(cv_normalized1, cv_normalized2, identity, identity, cv::Mat(),
+                                  cv::Mat(), mask,
+                                  MakeUsacParams(options, threshold_normalized, seed_E));
+    });
+    if (E.num_inliers >= 5) {
+      calibrated_pose = PolishPose(E.model, normalized1, normalized2, threshold_normalized,
+                                   /*reselect=*/true, &E.inliers);
+      E.model = EssentialFromPose(calibrated_pose);
+      E.num_inliers = static_cast<int>(std::count(E.inliers.begin(), E.inliers.end(), 1));
+    }
+  }
+  result.num_E_inliers = E.num_inliers;
+  result.num_F_inliers = F.num_inliers;
+  result.num_H_inliers = H.num_inliers;
+
+  // COLMAP's classification: prefer E, then F, then H.
+  const ModelEstimate* best = nullptr;
+  int config = TwoViewGeometry::kDegenerate;
+  if (calibrated && E.num_inliers >= options.min_num_inliers &&
+      E.num_inliers >= options.min_E_F_inlier_ratio * F.num_inliers) {
+    result.h_inlier_ratio = static_cast<double>(H.num_inliers) / E.num_inliers;
+    const bool planar = result.h_inlier_ratio > options.max_H_inlier_ratio;
+    config = planar ? TwoViewGeometry::kPlanarOrPanoramic : TwoViewGeometry::kCalibrated;
+    best = planar && H.num_inliers > E.num_inliers ? &H : &E;
+  } else if (F.num_inliers >= options.min_num_inliers) {
+    result.h_inlier_ratio = static_cast<double>(H.num_inliers) / F.num_inliers;
+    const bool planar = result.h_inlier_ratio > options.max_H_inlier_ratio;
+    config = planar ? TwoViewGeometry::kPlanarOrPanoramic : TwoViewGeometry::kUncalibrated;
+    best = planar && H.num_inliers > F.num_inliers ? &H : &F;
+  } else if (H.num_inliers >= options.min_num_inliers) {
+    config = TwoViewGeometry::kPlanarOrPanoramic;
+    best = &H;
+  }
+  if (best == nullptr || best->num_inliers < options.min_inlier_ratio * static_cast<double>(n)) {
+    return result;
+  }
+
+  geometry.config = config;
+  geometry.F = F.model;
+  geometry.H = H.model;
+  const Eigen::Matrix3d K1 = CalibrationMatrix(camera1);
+  const Eigen::Matrix3d K2 = CalibrationMatrix(camera2);
+  std::vector<char> inlier_mask = best->inliers;
+  Rigid3d pose;
+  if (config == TwoViewGeometry::kCalibrated) {
+    geometry.E = E.model;
+    pose = calibrated_pose;
+  } else if (config == TwoViewGeometry::kUncalibrated) {
+    // As COLMAP: E from F and the (guessed) intrinsics; polished on F's inliers, which stay.
+    std::vector<char> mask = inlier_mask;
+    pose = PolishPose(K2.transpose() * F.model * K1, normalized1, normalized2,
+                      threshold_normalized, /*reselect=*/false, &mask);
+    geometry.E = EssentialFromPose(pose);
+  } else {
+    geometry.E = calibrated && E.num_inliers > 0 ? E.model
+                                                 : Eigen::Matrix3d(K2.transpose() * F.model * K1);
+    pose = PoseFromHomography(K2.inverse() * H.model * K1, Select(normalized1, inlier_mask),
+                              Select(normalized2, inlier_mask));
+  }
+
+  const PoseSupport support =
+      EvaluatePose(pose, Select(normalized1, inlier_mask), Select(normalized2, inlier_mask));
+  result.median_tri_angle_deg = support.median_angle_deg;
+  result.num_pose_inliers = support.num_in_front;
+  if (config == TwoViewGeometry::kPlanarOrPanoramic) {
+    const bool panoramic = pose.translation.norm() < 1e-12 ||
+                           support.median_angle_deg < options.min_planar_tri_angle_deg;
+    geometry.config = panoramic ? TwoViewGeometry::kPanoramic : TwoViewGeometry::kPlanar;
+    pose.translation =
+        panoramic ? Eigen::Vector3d::Zero() : Eigen::Vector3d(pose.translation.normalized());
+  }
+  geometry.cam2_from_cam1 = pose;
+  for (size_t i = 0; i < n; ++i) {
+    if (inlier_mask[i]) geometry.inlier_matches.push_back(matches[i]);
+  }
+  return result;
+}
+
+}  // namespace loopsfm

@@ -1,0 +1,160 @@
+#include "loopsfm/pipeline/extract.h"
+
+#include <map>
+
+#include <opencv2/core.hpp>
+#include <tbb/global_control.h>
+#include <tbb/parallel_pipeline.h>
+
+#include "loopsfm/util/errors.h"
+#include "loopsfm/util/logging.h"
+#include "loopsfm/util/progress.h"
+#include "loopsfm/util/timer.h"
+
+namespace loopsfm {
+
+void ExtractOptions::Check() const {
+  keyframes.Check();
+  sift.Check();
+  if (intrinsics) intrinsics->Check();
+  LOOPSFM_REQUIRE_OPTION(num_threads >= 0, "--threads must be 0 (all cores) or positive, got {}",
+                         num_threads);
+}
+
+namespace {
+
+// One camera per image size (per source for video); reuses matching cameras already in the
+// database so a resumed run keeps its ids.
+class CameraRegistry {
+ public:
+  CameraRegistry(Database& database, const std::optional<Camera>& intrinsics)
+      : database_(database), intrinsics_(intrinsics) {
+    for (const Camera& camera : database_.ReadCameras()) stored_.push_back(camera);
+  }
+
+  camera_t CameraFor(int width, int height, const std::string& frame_name) {
+    const auto key = std::make_pair(width, height);
+    if (auto it = by_size_.find(key); it != by_size_.end()) return it->second;
+    Camera camera;
+    if (intrinsics_) {
+      if (intrinsics_->width != width || intrinsics_->height != height) {
+        throw InputError(fmt::format(
+            "frame '{}' is {}x{} but the intrinsics file describes a {}x{} camera; pass "
+            "intrinsics for this size, or drop --intrinsics to let loopsfm guess",
+            frame_name, width, height, intrinsics_->width, intrinsics_->height));
+      }
+      camera = *intrinsics_;
+    } else {
+      camera = Camera::GuessFromImageSize(width, height);
+    }
+    camera_t id = kInvalidCameraId;
+    for (const Camera& stored : stored_) {
+      if (stored.SameIntrinsics(camera) &&
+          stored.has_prior_focal_length == camera.has_prior_focal_length) {
+        id = stored.camera_id;
+        break;
+      }
+    }
+    if (id == kInvalidCameraId) {
+      id = database_.WriteCamera(camera);
+      if (!by_size_.empty()) {
+        spdlog::warn("frame '{}' is {}x{}, a new size: it gets camera {} of its own", frame_name,
+                     width, height, id);
+      }
+    }
+    by_size_[key] = id;
+    return id;
+  }
+
+  int NumCameras() const { return static_cast<int>(by_size_.size()); }
+
+ private:
+  Database& database_;
+  std::optional<Camera> intrinsics_;
+  std::vector<Camera> stored_;
+  std::map<std::pair<int, int>, camera_t> by_size_;
+};
+
+struct WorkItem {
+  Keyframe keyframe;
+  bool resumed = false;
+  FeatureSet features;
+};
+
+}  // namespace
+
+ExtractReport ExtractFeatures(const std::filesystem::path& input, Database& database,
+                              const ExtractOptions& options) {
+  options.Check();
+  Timer timer;
+  std::unique_ptr<FrameSource> source = OpenFrameSource(input);
+  KeyframeSelector selector(*source, options.keyframes);
+  CameraRegistry cameras(database, options.intrinsics);
+
+  const int threads = options.num_threads > 0 ? options.num_threads
+                                              : std::max(1, cv::getNumberOfCPUs());
+  tbb::global_control limit(tbb::global_control::max_allowed_parallelism, threads);
+  // Parallelism is across frames; OpenCV's own threads inside one frame would oversubscribe.
+  const int previous_cv_threads = cv::getNumThreads();
+  cv::setNumThreads(1);
+
+  const int expected = source->Info().expected_frames / options.keyframes.every;
+  Progress progress("extract", expected > 0 ? expected : 0, options.show_progress);
+  ExtractReport report;
+  try {
+    tbb::parallel_pipeline(
+        static_cast<size_t>(2 * threads),
+        tbb::make_filter<void, std::shared_ptr<WorkItem>>(
+            tbb::filter_mode::serial_in_order,
+            [&](tbb::flow_control& fc) -> std::shared_ptr<WorkItem> {
+              std::optional<Keyframe> keyframe = selector.Next();
+              if (!keyframe) {
+                fc.stop();
+                return nullptr;
+              }
+              auto item = std::make_shared<WorkItem>();
+              item->keyframe = std::move(*keyframe);
+              const auto stored = database.FindFrame(item->keyframe.frame.name);
+              item->resumed = stored && database.HasFeatures(stored->image_id);
+              return item;
+            }) &
+            tbb::make_filter<std::shared_ptr<WorkItem>, std::shared_ptr<WorkItem>>(
+                tbb::filter_mode::parallel,
+                [&](std::shared_ptr<WorkItem> item) {
+                  if (!item->resumed) item->features = ExtractSift(item->keyframe.frame.image, options.sift);
+                  return item;
+                }) &
+            tbb::make_filter<std::shared_ptr<WorkItem>, void>(
+                tbb::filter_mode::serial_in_order, [&](std::shared_ptr<WorkItem> item) {
+                  const RawFrame& raw = item->keyframe.frame;
+                  ++report.frames_decoded;
+                  progress.Advance();
+                  if (item->resumed) {
+                    ++report.frames_resumed;
+                    return;
+                  }
+                  Frame frame;
+                  frame.name = raw.name;
+                  frame.camera_id = cameras.CameraFor(raw.image.cols, raw.image.rows, raw.name);
+                  Database::Transaction transaction(database);
+                  frame.image_id = database.WriteFrame(frame);
+                  database.WriteFeatures(frame.image_id, item->features);
+                  database.WriteFrameOrigin(frame.image_id,
+                                            {raw.source_index, item->keyframe.sharpness});
+                  transaction.Commit();
+                  ++report.frames_extracted;
+                  report.num_features += item->features.Size();
+                }));
+  } catch (...) {
+    cv::setNumThreads(previous_cv_threads);
+    throw;
+  }
+  cv::setNumThreads(previous_cv_threads);
+  progress.Finish();
+  report.unreadable_images = source->NumSkipped();
+  report.num_cameras = cameras.NumCameras();
+  report.seconds = timer.ElapsedSeconds();
+  return report;
+}
+
+}  // namespace loopsfm

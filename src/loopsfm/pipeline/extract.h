@@ -1,0 +1,49 @@
+#pragma once
+// The frames + features stage: decode a video or image folder, keep keyframes, extract SIFT
+// in parallel and store frames, cameras and features in the database. Frames are streamed
+// through a bounded pipeline, so memory does not grow with the number of frames. Frames
+// already stored with features are skipped, so an interrupted run resumes.
+
+#include <filesystem>
+#include <functional>
+#include <optional>
+
+#include "loopsfm/feature/sift.h"
+#include "loopsfm/scene/camera.h"
+#include "loopsfm/storage/database.h"
+#include "loopsfm/video/keyframes.h"
+
+namespace loopsfm {
+
+struct ExtractOptions {
+  // Which frames to keep.
+  KeyframeOptions keyframes;
+  // Detector and descriptor settings.
+  SiftOptions sift;
+  // Known intrinsics (from --intrinsics); without them a camera is guessed per image size.
+  std::optional<Camera> intrinsics;
+  // Worker threads for feature extraction (0: all cores).
+  int num_threads = 0;
+  // Show progress on stderr.
+  bool show_progress = true;
+  void Check() const;
+};
+
+struct ExtractReport {
+  int frames_decoded = 0;      // keyframes taken from the source
+  int frames_extracted = 0;    // of which features were extracted now
+  int frames_resumed = 0;      // of which were already in the database
+  int unreadable_images = 0;   // folder images that could not be read
+  int num_cameras = 0;
+  size_t num_features = 0;     // over the frames extracted now
+  double seconds = 0.0;
+  double FeaturesPerFrame() const {
+    return frames_extracted ? double(num_features) / frames_extracted : 0.0;
+  }
+  double FramesPerSecond() const { return seconds > 0 ? frames_extracted / seconds : 0.0; }
+};
+
+ExtractReport ExtractFeatures(const std::filesystem::path& input, Database& database,
+                              const ExtractOptions& options);
+
+}  // namespace loopsfm

@@ -1,0 +1,167 @@
+#include "loopsfm/pipeline/reconstruct.h"
+
+#include <unordered_map>
+
+#include "loopsfm/eval/trajectory_metrics.h"
+#include "loopsfm/scene/dataset_files.h"
+#include "loopsfm/storage/colmap_model.h"
+#include "loopsfm/storage/ply.h"
+#include "loopsfm/util/errors.h"
+#include "loopsfm/util/logging.h"
+#include "loopsfm/util/progress.h"
+#include "loopsfm/util/timer.h"
+#include "loopsfm/video/frame_source.h"
+
+namespace loopsfm {
+namespace fs = std::filesystem;
+
+void ReconstructOptions::Check() const {
+  extract.Check();
+  match.Check();
+  mapper.Check();
+}
+
+MapperInput LoadMapperInput(const Database& database, TrackBuildReport* tracks_report) {
+  MapperInput input;
+  input.cameras = database.ReadCameras();
+  for (const Frame& frame : FramesInCaptureOrder(database)) {
+    MapperFrame mf;
+    mf.image_id = frame.image_id;
+    mf.camera_id = frame.camera_id;
+    mf.name = frame.name;
+    for (const FeatureKeypoint& kp : database.ReadKeypoints(frame.image_id)) {
+      mf.points2D.emplace_back(kp.x, kp.y);
+    }
+    input.frames.push_back(std::move(mf));
+  }
+  std::unordered_map<image_t, size_t> num_points2D;
+  for (const MapperFrame& frame : input.frames) num_points2D[frame.image_id] = frame.points2D.size();
+  for (auto& [pair, geometry] : database.ReadAllTwoViewGeometries()) {
+    if (geometry.IsVerified()) input.pairs.push_back({pair, std::move(geometry)});
+  }
+  std::vector<VerifiedPairMatches> verified;
+  for (const MapperPair& pair : input.pairs) {
+    verified.push_back({pair.pair, &pair.geometry.inlier_matches});
+  }
+  input.tracks = BuildTracks(num_points2D, verified, {}, tracks_report);
+  return input;
+}
+
+void ColorizeFromSource(const fs::path& input, std::vector<Reconstruction>* models) {
+  // name -> (model, image id)
+  std::unordered_map<std::string, std::pair<size_t, image_t>> wanted;
+  for (size_t m = 0; m < models->size(); ++m) {
+    for (image_t id : (*models)[m].RegImageIds()) wanted[(*models)[m].GetImage(id).name] = {m, id};
+  }
+  std::vector<std::unordered_map<point3D_t, Eigen::Vector3d>> sums(models->size());
+  std::vector<std::unordered_map<point3D_t, int>> counts(models->size());
+  std::unique_ptr<FrameSource> source = OpenFrameSource(input);
+  size_t found = 0;
+  while (found < wanted.size()) {
+    std::optional<RawFrame> frame = source->Next();
+    if (!frame) break;
+    auto it = wanted.find(frame->name);
+    if (it == wanted.end()) continue;
+    ++found;
+    const auto [m, image_id] = it->second;
+    const Image& image = (*models)[m].GetImage(image_id);
+    for (const Point2D& p : image.points2D) {
+      if (!p.HasPoint3D()) continue;
+      const int col = std::clamp(static_cast<int>(p.xy.x()), 0, frame->image.cols - 1);
+      const int row = std::clamp(static_cast<int>(p.xy.y()), 0, frame->image.rows - 1);
+      const cv::Vec3b bgr = frame->image.at<cv::Vec3b>(row, col);
+      sums[m][p.point3D_id] += Eigen::Vector3d(bgr[2], bgr[1], bgr[0]);
+      ++counts[m][p.point3D_id];
+    }
+  }
+  for (size_t m = 0; m < models->size(); ++m) {
+    for (auto& [id, point] : (*models)[m].Points3D()) {
+      const auto c = counts[m].find(id);
+      if (c == counts[m].end()) continue;
+      point.color = (sums[m][id] / c->second).array().round().cast<uint8_t>();
+    }
+  }
+}
+
+std::vector<ModelSummary> ExportModels(const std::vector<Reconstruction>& models,
+                                       const fs::path& output_dir, bool write_text) {
+  std::vector<ModelSummary> summaries;
+  const fs::path sparse = output_dir / "sparse";
+  // Stale model folders from an earlier run would mix with this run's models.
+  if (fs::exists(sparse)) fs::remove_all(sparse);
+  for (size_t m = 0; m < models.size(); ++m) {
+    ModelSummary summary;
+    summary.path = sparse / std::to_string(m);
+    fs::create_directories(summary.path);
+    WriteColmapModelBinary(summary.path, models[m]);
+    if (write_text) WriteColmapModelText(summary.path, models[m]);
+    summary.num_registered = models[m].NumRegImages();
+    summary.num_points = models[m].NumPoints3D();
+    summary.mean_track_length = models[m].ComputeMeanTrackLength();
+    Reconstruction copy = models[m];
+    summary.mean_reprojection_error = copy.UpdateReprojectionErrors();
+    summaries.push_back(summary);
+  }
+  if (!models.empty()) {
+    WritePly(output_dir / "points.ply", models[0]);
+    WriteTrajectoryFile(output_dir / "trajectory.txt", TrajectoryFromReconstruction(models[0]));
+  }
+  return summaries;
+}
+
+ReconstructReport Reconstruct(const fs::path& input, const fs::path& output_dir,
+                              const ReconstructOptions& options) {
+  options.Check();
+  Timer total;
+  ReconstructReport report;
+  std::error_code ec;
+  fs::create_directories(output_dir, ec);
+  if (ec || !fs::is_directory(output_dir)) {
+    throw StorageError(fmt::format("cannot create output folder '{}': {}", output_dir.string(),
+                                   ec ? ec.message() : "a file of that name exists"));
+  }
+  Database database = Database::Open((output_dir / "database.db").string());
+
+  Timer stage;
+  report.extract = ExtractFeatures(input, database, options.extract);
+  report.stage_times.push_back({"extract", stage.ElapsedSeconds()});
+  report.num_frames = database.NumFrames();
+  spdlog::info("extract: {} frames ({} new), {:.0f} features/frame", report.num_frames,
+               report.extract.frames_extracted, report.extract.FeaturesPerFrame());
+
+  stage.Restart();
+  report.match = MatchPairs(database, options.match);
+  report.stage_times.push_back({"match", stage.ElapsedSeconds()});
+  spdlog::info("match ({}): {} pairs, {} verified now, {:.0f} mean inliers",
+               PairStrategyName(options.match.strategy), report.match.num_pairs,
+               report.match.num_pairs_verified, report.match.MeanInliers());
+
+  stage.Restart();
+  const MapperInput mapper_input = LoadMapperInput(database, &report.tracks);
+  report.stage_times.push_back({"tracks", stage.ElapsedSeconds()});
+  spdlog::info("tracks: {} (mean length {:.2f}, {} conflicting removed)", report.tracks.num_tracks,
+               report.tracks.mean_track_length, report.tracks.num_conflicting_tracks);
+
+  stage.Restart();
+  std::vector<Reconstruction> models;
+  {
+    Progress progress("map", mapper_input.frames.size(), options.show_progress);
+    models = RunIncrementalMapper(mapper_input, options.mapper, &report.mapper,
+                                  [&](size_t, size_t) { progress.Advance(); });
+  }
+  report.stage_times.push_back({"map", stage.ElapsedSeconds()});
+  if (models.empty()) {
+    spdlog::warn("no model could be started: no frame pair had enough matches with a wide enough "
+                 "baseline; try --pairs exhaustive, more frames (--every 1), or --intrinsics");
+  }
+
+  stage.Restart();
+  ColorizeFromSource(input, &models);
+  report.models = ExportModels(models, output_dir, options.write_text);
+  report.stage_times.push_back({"export", stage.ElapsedSeconds()});
+  report.total_seconds = total.ElapsedSeconds();
+  report.peak_memory_bytes = PeakResidentBytes();
+  return report;
+}
+
+}  // namespace loopsfm

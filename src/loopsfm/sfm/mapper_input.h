@@ -1,0 +1,41 @@
+#pragma once
+// What the mappers read: plain values, loaded from the database by the pipeline, so the
+// mappers never touch storage. Tracks are the ones built from matching (before any mapper
+// prunes them); the mapper keeps them unchanged for loop closing.
+
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "loopsfm/scene/camera.h"
+#include "loopsfm/scene/track.h"
+#include "loopsfm/scene/two_view_geometry.h"
+
+namespace loopsfm {
+
+struct MapperFrame {
+  image_t image_id = kInvalidImageId;
+  camera_t camera_id = kInvalidCameraId;
+  std::string name;
+  // Keypoint positions, COLMAP pixel convention.
+  std::vector<Eigen::Vector2d> points2D;
+};
+
+struct MapperPair {
+  ImagePair pair;
+  // Verified geometry; inlier matches index pair.image_id1's and pair.image_id2's points.
+  TwoViewGeometry geometry;
+};
+
+struct MapperInput {
+  std::vector<Camera> cameras;
+  // In capture order.
+  std::vector<MapperFrame> frames;
+  // Verified pairs only.
+  std::vector<MapperPair> pairs;
+  // Conflict-free tracks over the verified matches.
+  std::vector<Track> tracks;
+};
+
+}  // namespace loopsfm

@@ -1,0 +1,202 @@
+#include "loopsfm/synth/render.h"
+
+#include <cmath>
+#include <system_error>
+
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/videoio.hpp>
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+#include <tbb/task_group.h>
+
+#include "loopsfm/util/errors.h"
+#include "loopsfm/util/timer.h"
+
+namespace loopsfm {
+namespace {
+
+// Linear radiance in [0, 1] to an 8-bit value with a display gamma of 2.2.
+uchar ToByte(double linear) {
+  const double encoded = std::pow(std::clamp(linear, 0.0, 1.0), 1.0 / 2.2);
+  return static_cast<uchar>(std::lround(255.0 * encoded));
+}
+
+// What the ray through a pixel centre saw, to find the pixels that straddle an edge.
+struct CentreSample {
+  Eigen::Vector3d rgb = Eigen::Vector3d::Zero();
+  Eigen::Vector3d normal = Eigen::Vector3d::Zero();
+  double distance = 0.0;
+  // Which surface (kind, index, and face of a box) was hit; -1 for the sky.
+  int surface = -1;
+
+  static CentreSample From(const std::optional<SurfaceHit>& hit, const Eigen::Vector3d& rgb) {
+    CentreSample sample;
+    sample.rgb = rgb;
+    if (!hit) return sample;
+    sample.normal = hit->normal;
+    sample.distance = hit->distance;
+    int face = 0;
+    if (hit->kind == SurfaceKind::kBox) {
+      for (int axis = 0; axis < 3; ++axis) {
+        if (hit->normal[axis] != 0.0) face = 2 * axis + (hit->normal[axis] > 0.0 ? 1 : 0);
+      }
+    }
+    sample.surface = (static_cast<int>(hit->kind) << 24) + 8 * hit->index + face;
+    return sample;
+  }
+
+  // True where the two samples likely lie on different sides of an edge: different surfaces,
+  // a crease (normals more than ~15 degrees apart) or a jump in depth (self-occlusion).
+  bool DiffersFrom(const CentreSample& other) const {
+    if (surface != other.surface) return true;
+    if (surface < 0) return false;
+    return normal.dot(other.normal) < 0.966 ||
+           std::abs(distance - other.distance) > 0.05 * std::min(distance, other.distance);
+  }
+};
+
+void CreateDirectory(const std::filesystem::path& path) {
+  std::error_code error;
+  std::filesystem::create_directories(path, error);
+  if (error || !std::filesystem::is_directory(path)) {
+    throw StorageError(fmt::format("cannot create output folder '{}': {}; choose a writable path",
+                                   path.string(), error ? error.message() : "not a folder"));
+  }
+}
+
+// Opens an mp4 writer with the FFmpeg backend: H.264 ('avc1') where the encoder exists,
+// else MPEG-4 part 2 ('mp4v'). Returns the FourCC used.
+std::string OpenVideo(const std::filesystem::path& path, const SynthOptions& options,
+                      cv::VideoWriter* writer) {
+  for (const char* codec : {"avc1", "mp4v"}) {
+    const int fourcc = cv::VideoWriter::fourcc(codec[0], codec[1], codec[2], codec[3]);
+    if (writer->open(path.string(), cv::CAP_FFMPEG, fourcc, options.fps,
+                     cv::Size(options.width, options.height), true) &&
+        writer->isOpened()) {
+      // Honoured by backends that support it; SIFT needs frames with few coding artefacts.
+      writer->set(cv::VIDEOWRITER_PROP_QUALITY, 100.0);
+      return codec;
+    }
+  }
+  throw StorageError(fmt::format(
+      "cannot write video '{}': OpenCV's FFmpeg backend has neither an H.264 ('avc1') nor an "
+      "MPEG-4 ('mp4v') encoder; write images instead (no video option) or install an OpenCV "
+      "built with FFmpeg",
+      path.string()));
+}
+
+}  // namespace
+
+cv::Mat RenderFrame(const SyntheticScene& scene, int frame) {
+  LOOPSFM_CHECK(frame >= 0 && frame < scene.NumFrames());
+  const Camera& camera = scene.camera;
+  const int width = camera.width, height = camera.height;
+  const int n = scene.options.supersampling;
+  const Rigid3d& world_from_cam = scene.world_from_cam[frame];
+  const Eigen::Matrix3d rotation = world_from_cam.rotation.toRotationMatrix();
+  const Eigen::Vector3d center = world_from_cam.translation;
+  const double pixel_angle = 1.0 / camera.MeanFocalLength();
+  auto direction = [&](double x, double y) -> Eigen::Vector3d {
+    return (rotation * camera.CamFromImg(Eigen::Vector2d(x, y)).homogeneous()).normalized();
+  };
+
+  // Pass 1: one ray through every pixel centre.
+  std::vector<CentreSample> centres(static_cast<size_t>(width) * height);
+  tbb::parallel_for(tbb::blocked_range<int>(0, height), [&](const auto& rows) {
+    for (int row = rows.begin(); row < rows.end(); ++row) {
+      for (int col = 0; col < width; ++col) {
+        const Eigen::Vector3d ray = direction(col + 0.5, row + 0.5);
+        const std::optional<SurfaceHit> hit = scene.world.CastRay(center, ray);
+        centres[static_cast<size_t>(row) * width + col] =
+            CentreSample::From(hit, scene.world.Shade(hit, ray, pixel_angle));
+      }
+    }
+  });
+
+  // Pass 2: pixels on a silhouette or crease (where the centre rays of neighbouring pixels
+  // see different surfaces) are supersampled with n x n rays spread over the pixel. Texture
+  // inside a surface needs no more rays: it is band-limited to the pixel footprint.
+  cv::Mat image(height, width, CV_8UC3);
+  tbb::parallel_for(tbb::blocked_range<int>(0, height), [&](const auto& rows) {
+    for (int row = rows.begin(); row < rows.end(); ++row) {
+      auto* out = image.ptr<cv::Vec3b>(row);
+      for (int col = 0; col < width; ++col) {
+        const CentreSample& sample = centres[static_cast<size_t>(row) * width + col];
+        bool edge = false;
+        for (int dy = -1; dy <= 1 && !edge && n > 1; ++dy) {
+          for (int dx = -1; dx <= 1 && !edge; ++dx) {
+            const int r = row + dy, c = col + dx;
+            if (r < 0 || c < 0 || r >= height || c >= width) continue;
+            edge = sample.DiffersFrom(centres[static_cast<size_t>(r) * width + c]);
+          }
+        }
+        Eigen::Vector3d rgb = sample.rgb;
+        if (edge) {
+          rgb.setZero();
+          for (int sy = 0; sy < n; ++sy) {
+            for (int sx = 0; sx < n; ++sx) {
+              const Eigen::Vector3d ray = direction(col + (sx + 0.5) / n, row + (sy + 0.5) / n);
+              rgb += scene.world.Radiance(center, ray, pixel_angle);
+            }
+          }
+          rgb /= n * n;
+        }
+        out[col] = cv::Vec3b(ToByte(rgb.z()), ToByte(rgb.y()), ToByte(rgb.x()));
+      }
+    }
+  });
+  return image;
+}
+
+SynthReport RenderSyntheticScene(const SynthOptions& options,
+                                 const std::filesystem::path& output_dir,
+                                 const SynthProgressCallback& progress) {
+  const Timer timer;
+  const SyntheticScene scene = MakeScene(options);
+  CreateDirectory(output_dir);
+  SynthReport report;
+  report.output = output_dir;
+  report.num_frames = scene.NumFrames();
+  report.groundtruth = output_dir / "groundtruth.txt";
+  report.intrinsics = output_dir / "intrinsics.txt";
+  WriteIntrinsicsFile(report.intrinsics, scene.camera);
+  WriteTrajectoryFile(report.groundtruth, GroundTruthTrajectory(scene));
+
+  cv::VideoWriter video;
+  if (options.video) {
+    report.frames = output_dir / "video.mp4";
+    report.video_codec = OpenVideo(report.frames, options, &video);
+  } else {
+    report.frames = output_dir / "images";
+    CreateDirectory(report.frames);
+  }
+  auto write_frame = [&](const cv::Mat& image, int frame) {
+    if (options.video) {
+      video.write(image);
+      return;
+    }
+    const std::filesystem::path path = report.frames / SyntheticFrameName(frame);
+    if (!cv::imwrite(path.string(), image)) {
+      throw StorageError(fmt::format("cannot write image '{}'; check the disk and permissions",
+                                     path.string()));
+    }
+  };
+
+  // Frame i is encoded and written while frame i + 1 renders; at most two frames are in memory.
+  tbb::task_group writer;
+  for (int frame = 0; frame < scene.NumFrames(); ++frame) {
+    const Timer render_timer;
+    cv::Mat image = RenderFrame(scene, frame);
+    report.render_seconds += render_timer.ElapsedSeconds();
+    writer.wait();  // rethrows a failed write of the previous frame
+    if (frame > 0 && progress) progress(frame, scene.NumFrames());
+    writer.run([&write_frame, image = std::move(image), frame] { write_frame(image, frame); });
+  }
+  writer.wait();
+  if (options.video) video.release();
+  if (progress) progress(scene.NumFrames(), scene.NumFrames());
+  report.seconds = timer.ElapsedSeconds();
+  return report;
+}
+
+}  // namespace loopsfm

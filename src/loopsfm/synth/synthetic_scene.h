@@ -1,0 +1,87 @@
+#pragma once
+// Synthetic scenes with exact ground truth: the camera, the pose of every frame and the
+// surfaces, so that tests and benchmarks can check poses and 3D points against the truth.
+//
+//   cylinder  an open cylinder with a bumpy, noise-textured surface standing on a textured
+//             ground plane; the camera circles it a little more than once (380 degrees by
+//             default), looking at it and sinking slowly, so the last frames see what the
+//             first frames saw from a bit lower (a loop).
+//   street    a block of box buildings with noise-textured facades (a different texture per
+//             building); the camera walks around the block at a few metres, looking sideways
+//             at the facades, and at the end walks the first part of the loop again.
+//
+// World coordinates are metres with z up. Poses use OpenCV camera axes (x right, y down,
+// z forward); image coordinates follow COLMAP (the centre of the top-left pixel is (0.5, 0.5)).
+
+#include <cstdint>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "loopsfm/geometry/rigid3.h"
+#include "loopsfm/math/random.h"
+#include "loopsfm/scene/camera.h"
+#include "loopsfm/scene/dataset_files.h"
+#include "loopsfm/synth/world.h"
+
+namespace loopsfm {
+
+struct SynthOptions {
+  // Which scene to build: "cylinder" or "street".
+  std::string scene = "cylinder";
+  // Number of frames along the camera path.
+  int num_frames = 150;
+  // Image size in pixels.
+  int width = 640;
+  int height = 480;
+  // Focal length in pixels as a multiple of the image width (0.9 gives a 58 degree field).
+  double focal_length_factor = 0.9;
+  // Samples per pixel along each axis for anti-aliasing (2 means 2x2); 1 turns it off.
+  int supersampling = 2;
+  // Cylinder scene: angle in degrees travelled around the cylinder; above 360 the end of
+  // the path overlaps its start.
+  double cylinder_arc_degrees = 380.0;
+  // Street scene: fraction of the loop around the block that is walked a second time.
+  double street_revisit_fraction = 0.1;
+  // Write a single video.mp4 instead of images/frame_%06d.png.
+  bool video = false;
+  // Frame rate written into the video.
+  int fps = 30;
+  // Seed of the textures and of the street layout; the same seed gives the same frames.
+  uint64_t seed = kDefaultRandomSeed;
+
+  // Throws InvalidArgument naming the offending field.
+  void Check() const;
+};
+
+struct SyntheticScene {
+  SynthOptions options;
+  // PINHOLE camera shared by all frames.
+  Camera camera;
+  // Pose of every frame, camera-to-world.
+  std::vector<Rigid3d> world_from_cam;
+  SyntheticWorld world;
+  // Street: world.boxes[0, num_block_buildings) are the buildings of the block the camera
+  // walks around (then come pillars in front of it and the blocks across the streets).
+  int num_block_buildings = 0;
+
+  int NumFrames() const { return static_cast<int>(world_from_cam.size()); }
+};
+
+// Builds the camera, the poses and the surfaces (cheap; renders nothing). Calls Check().
+SyntheticScene MakeScene(const SynthOptions& options);
+
+// "frame_%06d.png", the name of a frame in images/ and in groundtruth.txt.
+std::string SyntheticFrameName(int frame);
+
+// The ground truth as written to groundtruth.txt: one entry per frame, world_from_cam.
+std::vector<TrajectoryEntry> GroundTruthTrajectory(const SyntheticScene& scene);
+
+// The surface point seen through `image_point` (COLMAP image coordinates) of `frame`, with its
+// distance from the camera centre, or nullopt where the ray sees the sky.
+std::optional<SurfaceHit> CastPixelRay(const SyntheticScene& scene, int frame,
+                                       const Eigen::Vector2d& image_point);
+
+}  // namespace loopsfm
