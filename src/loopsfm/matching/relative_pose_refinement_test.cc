@@ -73,16 +73,28 @@ TEST(RelativePoseRefinement, CauchyLossResistsAFewOutliers) {
   const Rigid3d truth(Eigen::Quaterniond(Eigen::AngleAxisd(0.2, RandomUnit(random))),
                       RandomUnit(random));
   std::vector<Eigen::Vector2d> p1, p2;
-  MakeCorrespondences(truth, 200, 1e-3, random, &p1, &p2);
-  const Rigid3d clean = RefineRelativePose(p1, p2, truth, 2e-3);
+  MakeCorrespondences(truth, 200, 1e-3, random, &p1, &p2);  // about 0.6 px at f = 600
+  const std::vector<Eigen::Vector2d> clean1(p1.begin() + 10, p1.end());
+  const std::vector<Eigen::Vector2d> clean2(p2.begin() + 10, p2.end());
   for (int i = 0; i < 10; ++i) p2[i] += Eigen::Vector2d(0.05, -0.03);  // 5% gross outliers
-  const Rigid3d refined = RefineRelativePose(p1, p2, truth, 2e-3);
-  // The outliers, 25 loss scales away, barely move the estimate of the clean data.
-  EXPECT_LT(RotationAngleDegrees(refined.rotation * clean.rotation.inverse()), 0.02);
-  EXPECT_LT(std::acos(std::min(1.0, refined.translation.dot(clean.translation))) * 180 / M_PI,
-            0.1);
-  // And the clean estimate is close to the truth for this noise (about 0.6 px at f = 600).
-  EXPECT_LT(RotationAngleDegrees(clean.rotation * truth.rotation.inverse()), 0.5);
+  auto rotation_error = [&](const Rigid3d& pose) {
+    return RotationAngleDegrees(pose.rotation * truth.rotation.inverse());
+  };
+  auto translation_error = [&](const Rigid3d& pose) {
+    return std::acos(std::min(1.0, pose.translation.dot(truth.translation))) * 180 / M_PI;
+  };
+  const Rigid3d robust = RefineRelativePose(p1, p2, truth, 2e-3);
+  const Rigid3d least_squares = RefineRelativePose(p1, p2, truth, 10.0);  // loss ~ quadratic
+  const Rigid3d clean = RefineRelativePose(clean1, clean2, truth, 2e-3);
+  // With the Cauchy loss the outliers barely move the estimate from the one without them;
+  // least squares is pulled away.
+  EXPECT_LT(RotationAngleDegrees(robust.rotation * clean.rotation.inverse()), 0.02);
+  EXPECT_LT(std::acos(std::min(1.0, robust.translation.dot(clean.translation))) * 180 / M_PI,
+            0.05);
+  EXPECT_GT(rotation_error(least_squares), 2 * rotation_error(robust));
+  EXPECT_GT(translation_error(least_squares), 2 * translation_error(robust));
+  EXPECT_LT(rotation_error(robust), 0.5);
+  EXPECT_LT(translation_error(robust), 2.0);
 }
 
 TEST(RelativePoseRefinement, TooFewPointsReturnTheStart) {

@@ -1,6 +1,7 @@
 #include "loopsfm/pipeline/extract.h"
 
 #include <map>
+#include <unordered_set>
 
 #include <opencv2/core.hpp>
 #include <tbb/global_control.h>
@@ -101,6 +102,12 @@ ExtractReport ExtractFeatures(const std::filesystem::path& input, Database& data
   const int expected = source->Info().expected_frames / options.keyframes.every;
   Progress progress("extract", expected > 0 ? expected : 0, options.show_progress);
   ExtractReport report;
+  // Names of frames stored with features by an earlier run. Read up front: the database is
+  // only touched by the last (writing) filter, never from two pipeline threads at once.
+  std::unordered_set<std::string> already_extracted;
+  for (const Frame& frame : database.ReadFrames()) {
+    if (database.HasFeatures(frame.image_id)) already_extracted.insert(frame.name);
+  }
   try {
     tbb::parallel_pipeline(
         static_cast<size_t>(2 * threads),
@@ -114,8 +121,7 @@ ExtractReport ExtractFeatures(const std::filesystem::path& input, Database& data
               }
               auto item = std::make_shared<WorkItem>();
               item->keyframe = std::move(*keyframe);
-              const auto stored = database.FindFrame(item->keyframe.frame.name);
-              item->resumed = stored && database.HasFeatures(stored->image_id);
+              item->resumed = already_extracted.count(item->keyframe.frame.name) > 0;
               return item;
             }) &
             tbb::make_filter<std::shared_ptr<WorkItem>, std::shared_ptr<WorkItem>>(

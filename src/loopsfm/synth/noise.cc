@@ -119,8 +119,11 @@ double FractalNoise(const GradientNoise& noise, const Eigen::Vector3d& p,
     double n = noise(q);
     if (params.ridged) n = 0.35 - std::abs(n);
     if (params.sharpness > 0.0) {
-      // A sigmoid like tanh, but cheaper.
-      const double x = (1.0 + (params.sharpness - 1.0) * OctaveWeight(2.0 * frequency * footprint)) * n;
+      // A sigmoid like tanh, but cheaper. Octaves close to the pixel limit are sharpened less,
+      // since the harmonics that sharpening adds would alias.
+      const double sharpness =
+          1.0 + (params.sharpness - 1.0) * OctaveWeight(1.5 * frequency * footprint);
+      const double x = sharpness * n;
       n = x / std::sqrt(1.0 + x * x);
     }
     sum += weight * amplitude * n;

@@ -39,7 +39,7 @@ struct FractalNoiseParams {
   double gain = 0.5;
   // When positive, each octave n is shaped by a sigmoid, x / sqrt(1 + x^2) with
   // x = sharpness * n, before summing, which turns soft noise into crisp blobs at every scale
-  // (good for blob detectors such as SIFT).
+  // (good for blob detectors such as SIFT). Octaves near the pixel limit are sharpened less.
   double sharpness = 0.0;
   // Each octave n is folded to 0.35 - |n| (thin vein-like ridges) before shaping.
   bool ridged = false;

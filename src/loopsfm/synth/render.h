@@ -35,12 +35,14 @@ struct SynthReport {
   double render_seconds = 0.0;
 };
 
-// Called after each frame is written with (frames done, frames in all).
+// Called after each frame is written with (frames done, frames in all). An exception thrown
+// from it (e.g. Cancelled) stops the rendering; the frames written so far stay on disk.
 using SynthProgressCallback = std::function<void(int, int)>;
 
 // Renders all frames of the scene chosen by `options` into `output_dir` (created if needed),
-// streaming frames to disk one at a time. Throws InvalidArgument for bad options and
-// StorageError when the output cannot be written (or no mp4 encoder is available).
+// streaming frames to disk one at a time; frames of an earlier run there (frame_NNNNNN.png,
+// video.mp4) are removed first. Throws InvalidArgument for bad options and StorageError when
+// the output cannot be written (or no mp4 encoder is available).
 SynthReport RenderSyntheticScene(const SynthOptions& options,
                                  const std::filesystem::path& output_dir,
                                  const SynthProgressCallback& progress = {});

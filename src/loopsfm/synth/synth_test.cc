@@ -1,8 +1,10 @@
 #include <gtest/gtest.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
+#include <fstream>
 
 #include <opencv2/core.hpp>
 #include <opencv2/features2d.hpp>
@@ -11,8 +13,8 @@
 #include <opencv2/videoio.hpp>
 
 #include "loopsfm/scene/dataset_files.h"
-#include "loopsfm/synth/render.h"
 #include "loopsfm/synth/noise.h"
+#include "loopsfm/synth/render.h"
 #include "loopsfm/synth/synthetic_scene.h"
 #include "loopsfm/util/errors.h"
 
@@ -28,11 +30,23 @@ SynthOptions SmallOptions(const std::string& scene) {
   return options;
 }
 
-std::filesystem::path FreshTempDir(const std::string& name) {
-  const auto path = std::filesystem::temp_directory_path() / ("loopsfm_synth_test_" + name);
-  std::filesystem::remove_all(path);
-  return path;
-}
+// An empty temporary folder (unique to this process), removed at the end of the test.
+class TempDir {
+ public:
+  explicit TempDir(const std::string& name)
+      : path_(std::filesystem::temp_directory_path() /
+              ("loopsfm_synth_test_" + std::to_string(::getpid()) + "_" + name)) {
+    std::filesystem::remove_all(path_);
+  }
+  ~TempDir() {
+    std::error_code error;
+    std::filesystem::remove_all(path_, error);
+  }
+  const std::filesystem::path& path() const { return path_; }
+
+ private:
+  std::filesystem::path path_;
+};
 
 Eigen::Vector2d Project(const SyntheticScene& scene, int frame, const Eigen::Vector3d& point) {
   const Eigen::Vector3d in_cam = scene.world_from_cam[frame].Inverse() * point;
@@ -88,12 +102,13 @@ TEST(SynthOptions, CheckRejectsBadOptions) {
   bad.street_revisit_fraction = -0.1;
   expect_rejected(bad, "street_revisit_fraction");
   EXPECT_THROW(MakeScene(bad), InvalidArgument);
-  EXPECT_THROW(RenderSyntheticScene(bad, FreshTempDir("bad")), InvalidArgument);
+  EXPECT_THROW(RenderSyntheticScene(bad, TempDir("bad").path()), InvalidArgument);
 }
 
 TEST(SyntheticScene, GroundTruthFilesRoundTripAndMatchPoses) {
   const SynthOptions options = SmallOptions("cylinder");
-  const auto dir = FreshTempDir("images");
+  const TempDir temp("images");
+  const std::filesystem::path& dir = temp.path();
   int progress_calls = 0;
   const SynthReport report = RenderSyntheticScene(options, dir, [&](int done, int total) {
     ++progress_calls;
@@ -135,6 +150,26 @@ TEST(SyntheticScene, GroundTruthFilesRoundTripAndMatchPoses) {
   // Principal point at the image centre in COLMAP's pixel convention.
   EXPECT_DOUBLE_EQ(camera.params[2], 160.0);
   EXPECT_DOUBLE_EQ(camera.params[3], 120.0);
+}
+
+TEST(SyntheticScene, OutputFolderHoldsOnlyTheLastRun) {
+  SynthOptions options = SmallOptions("street");
+  options.width = 64;
+  options.height = 48;
+  options.num_frames = 5;
+  const TempDir temp("rerun");
+  const std::filesystem::path& dir = temp.path();
+  RenderSyntheticScene(options, dir);
+  std::ofstream(dir / "images" / "notes.txt") << "not a frame";
+  options.num_frames = 3;
+  RenderSyntheticScene(options, dir);
+  for (int i = 0; i < 5; ++i) {
+    EXPECT_EQ(std::filesystem::exists(dir / "images" / SyntheticFrameName(i)), i < 3) << i;
+  }
+  EXPECT_TRUE(std::filesystem::exists(dir / "images" / "notes.txt"));  // not ours: kept
+  EXPECT_EQ(ReadTrajectoryFile(dir / "groundtruth.txt").size(), 3u);
+  // A file where the output folder should be.
+  EXPECT_THROW(RenderSyntheticScene(options, dir / "groundtruth.txt"), StorageError);
 }
 
 // A point hit by the ray through a pixel of one frame projects back exactly into that pixel,
@@ -301,11 +336,12 @@ TEST(SyntheticScene, PixelsAreAreaAveragesOfTheScene) {
         for (int c = 0; c < 3; ++c) error += std::abs(encode(mean[c]) - rendered[2 - c]) / 3.0;
         sum_error += error;
         large += error > 10.0;
-        if (error > 10.0) std::printf("%s large at %d %d: %.1f\n", name.c_str(), col, row, error);
         ++count;
       }
     }
-    EXPECT_LT(sum_error / count, 2.0);
+    // Measured: 0.45 (cylinder) and 0.35 (street) grey levels; 5.2 and 3.6 without the
+    // texture's band limit.
+    EXPECT_LT(sum_error / count, 1.0);
     EXPECT_LT(large, 0.01 * count);
   }
 }
@@ -375,7 +411,8 @@ TEST(GradientNoise, GradientMatchesFiniteDifferences) {
 TEST(SyntheticScene, VideoHasOneFramePerPoseAndHighQuality) {
   SynthOptions options = SmallOptions("cylinder");
   options.video = true;
-  const auto dir = FreshTempDir("video");
+  const TempDir temp("video");
+  const std::filesystem::path& dir = temp.path();
   const SynthReport report = RenderSyntheticScene(options, dir);
   EXPECT_TRUE(report.video_codec == "avc1" || report.video_codec == "mp4v") << report.video_codec;
   EXPECT_EQ(report.frames, dir / "video.mp4");

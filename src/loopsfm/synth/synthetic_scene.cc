@@ -113,7 +113,7 @@ Material RandomFacadeMaterial(Random* rng) {
   return m;
 }
 
-// Splits [lo, hi] into `parts` pieces of random length (each at least 60% of the mean).
+// Splits [lo, hi] into `parts` pieces with random lengths (ratios between 0.6 and 1.4).
 std::vector<double> RandomSplits(double lo, double hi, int parts, Random* rng) {
   std::vector<double> weights(parts);
   for (double& w : weights) w = rng->UniformReal(0.6, 1.4);

@@ -270,8 +270,8 @@ Eigen::Vector3d SyntheticWorld::Shade(const std::optional<SurfaceHit>& hit,
                                       const Eigen::Vector3d& direction,
                                       double pixel_angle) const {
   if (!hit) return Sky(direction);
-  // Size of one pixel on the surface; grazing views stretch it (clamped so that grazing
-  // surfaces keep some texture).
+  // Size of one pixel on the surface along its longer axis; grazing views stretch it (up to
+  // 20 times, so that the horizon keeps a little texture).
   const double cos_incidence = std::max(std::abs(hit->normal.dot(direction)), 0.05);
   const double footprint = hit->distance * pixel_angle / cos_incidence;
   const Eigen::Vector3d albedo = materials[hit->material].Albedo(hit->point_in_world, footprint);
