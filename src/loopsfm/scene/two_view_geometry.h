@@ -26,7 +26,8 @@ struct TwoViewGeometry {
   Eigen::Matrix3d E = Eigen::Matrix3d::Zero();
   Eigen::Matrix3d F = Eigen::Matrix3d::Zero();
   Eigen::Matrix3d H = Eigen::Matrix3d::Zero();
-  // Relative pose, valid for kCalibrated / kPlanar / kPanoramic; unit-length translation.
+  // Relative pose (x_cam2 = R x_cam1 + t): unit-length translation for kCalibrated,
+  // kUncalibrated (from the guessed intrinsics) and kPlanar; zero translation for kPanoramic.
   Rigid3d cam2_from_cam1;
   // The matches consistent with the geometry (indices into the two images' keypoints).
   FeatureMatches inlier_matches;
