@@ -1,0 +1,83 @@
+#include "loopsfm/matching/guided_pairing.h"
+
+#include <gtest/gtest.h>
+
+#include "loopsfm/math/random.h"
+
+namespace loopsfm {
+namespace {
+
+using BoolMatrix = Eigen::Matrix<bool, Eigen::Dynamic, Eigen::Dynamic>;
+
+// 100 frames; frames 90..99 revisit frames 0..9. A pair truly matches when the frames are
+// within 2 of each other along the path or across the loop.
+bool TrulyMatches(int i, int j) {
+  if (std::abs(i - j) <= 2) return true;
+  const int a = std::min(i, j), b = std::max(i, j);
+  return a < 10 && b >= 90 && std::abs(a - (b - 90)) <= 2;
+}
+
+TEST(GuidedPairing, RegionGrowingCoversTheLoopBlockAndStops) {
+  const int n = 100;
+  std::vector<image_t> ids(n);
+  for (int i = 0; i < n; ++i) ids[i] = i + 1;
+  // Scores like a vocabulary tree's: true pairs score high, but only a third of the loop
+  // pairs stand out; near misses (frames 3-4 apart) score in between.
+  Random random(3);
+  Eigen::MatrixXf scores(n, n);
+  for (int i = 0; i < n; ++i) {
+    for (int j = 0; j < n; ++j) {
+      const int a = std::min(i, j), b = std::max(i, j);
+      float score = static_cast<float>(random.UniformReal(0, 0.1));
+      if (std::abs(a - b) <= 4) score = static_cast<float>(random.UniformReal(0.2, 0.4));
+      if (TrulyMatches(a, b) && (b < 90 || (a + b) % 3 == 0)) score = static_cast<float>(random.UniformReal(0.5, 1.0));
+      scores(i, j) = score;
+    }
+  }
+  scores = (scores + scores.transpose()).eval() / 2;
+  // Sequential neighbours matched beforehand.
+  BoolMatrix tried = BoolMatrix::Constant(n, n, false), verified = tried;
+  for (int i = 0; i < n; ++i) {
+    for (int j = i + 1; j < n && j <= i + 2; ++j) tried(i, j) = tried(j, i) = verified(i, j) = verified(j, i) = true;
+  }
+  size_t calls = 0;
+  auto verify = [&](const std::vector<ImagePair>& pairs) {
+    ++calls;
+    std::vector<bool> ok;
+    for (const ImagePair& p : pairs) ok.push_back(TrulyMatches(p.image_id1 - 1, p.image_id2 - 1));
+    return ok;
+  };
+  GuidedPairingOptions options;
+  options.num_proposals = 20;
+  const GuidedPairingReport report = RunGuidedPairing(scores, ids, options, verify, &tried, &verified);
+
+  // Every true loop pair is found.
+  int loop_pairs = 0, found = 0;
+  for (int a = 0; a < 10; ++a) {
+    for (int b = 90; b < n; ++b) {
+      if (!TrulyMatches(a, b)) continue;
+      ++loop_pairs;
+      found += verified(a, b);
+    }
+  }
+  EXPECT_EQ(found, loop_pairs);
+  // It stopped long before trying everything (4950 pairs).
+  EXPECT_LT(report.num_tried, 600u);
+  EXPECT_EQ(report.rounds.size(), calls);
+  EXPECT_GE(report.rounds.size(), 2u);
+  // The last round failed for most of its proposals.
+  const auto& last = report.rounds.back();
+  EXPECT_GT(last.NumProposed() - last.num_verified, 0.7 * last.NumProposed());
+  EXPECT_GT(report.rounds[1].num_from_growing, 0u);
+  // Nothing is tried twice: tried pairs = sequential + proposals.
+  EXPECT_EQ(static_cast<size_t>(tried.count() / 2), 197u + report.num_tried);
+}
+
+TEST(GuidedPairing, RejectsBadOptions) {
+  GuidedPairingOptions options;
+  options.max_failure_ratio = 0;
+  EXPECT_THROW(options.Check(), std::exception);
+}
+
+}  // namespace
+}  // namespace loopsfm
