@@ -117,7 +117,7 @@ double FractalNoise(const GradientNoise& noise, const Eigen::Vector3d& p,
     const double weight = OctaveWeight(frequency * footprint);
     if (weight == 0.0) break;
     double n = noise(q);
-    if (params.ridged) n = 0.35 - std::abs(n);
+    if (params.ridged) n = 0.17 - std::abs(n);
     if (params.sharpness > 0.0) {
       // A sigmoid like tanh, but cheaper. Octaves close to the pixel limit are sharpened less,
       // since the harmonics that sharpening adds would alias.

@@ -41,7 +41,8 @@ struct FractalNoiseParams {
   // x = sharpness * n, before summing, which turns soft noise into crisp blobs at every scale
   // (good for blob detectors such as SIFT). Octaves near the pixel limit are sharpened less.
   double sharpness = 0.0;
-  // Each octave n is folded to 0.35 - |n| (thin vein-like ridges) before shaping.
+  // Each octave n is folded to 0.17 - |n| (vein-like ridges, about half the area dark) before
+  // shaping.
   bool ridged = false;
 };
 

@@ -7,8 +7,9 @@
 //             default), looking at it and sinking slowly, so the last frames see what the
 //             first frames saw from a bit lower (a loop).
 //   street    a block of box buildings with noise-textured facades (a different texture per
-//             building); the camera walks around the block at a few metres, looking sideways
-//             at the facades, and at the end walks the first part of the loop again.
+//             building), pillars in front of it and blocks across the streets; the camera
+//             walks around the block 6 m from it, looking sideways at the facades, and at the
+//             end walks the first 10% of the loop again.
 //
 // World coordinates are metres with z up. Poses use OpenCV camera axes (x right, y down,
 // z forward); image coordinates follow COLMAP (the centre of the top-left pixel is (0.5, 0.5)).
@@ -38,7 +39,8 @@ struct SynthOptions {
   int height = 480;
   // Focal length in pixels as a multiple of the image width (0.9 gives a 58 degree field).
   double focal_length_factor = 0.9;
-  // Samples per pixel along each axis for anti-aliasing (2 means 2x2); 1 turns it off.
+  // Rays per pixel along each axis for pixels on an edge (2 means 2x2); 1 turns this off.
+  // Other pixels take one ray: their texture is band-limited to the pixel footprint.
   int supersampling = 2;
   // Cylinder scene: angle in degrees travelled around the cylinder; above 360 the end of
   // the path overlaps its start.
