@@ -33,7 +33,21 @@ ExtractOptions ExtractFlags::Resolve() const {
 }
 
 void AddMatchFlags(CLI::App* cmd, MatchFlags* flags) {
-  cmd->add_option("--pairs", flags->pairs, "Pairing strategy: exhaustive | sequential (default)");
+  cmd->add_option("--pairs", flags->pairs,
+                  "Pairing strategy: exhaustive | sequential (default) | vocabtree (sequential "
+                  "neighbours plus vocabulary-tree loop detection)");
+  cmd->add_option("--vocab", flags->vocab, "Vocabulary tree file from `loopsfm vocab build` "
+                  "(default: train one on the scene's own descriptors)");
+  cmd->add_option("--vocab-branching", flags->options.vocab_tree.branching,
+                  "Vocabulary tree branching factor k")->capture_default_str();
+  cmd->add_option("--vocab-depth", flags->options.vocab_tree.depth, "Vocabulary tree depth L")
+      ->capture_default_str();
+  cmd->add_option("--proposals", flags->options.guided.num_proposals,
+                  "Vocabtree: best-scoring pairs proposed per round (0: number of frames)")
+      ->capture_default_str();
+  cmd->add_option("--stop-failure-ratio", flags->options.guided.max_failure_ratio,
+                  "Vocabtree: stop when more than this fraction of a round's proposals fail")
+      ->capture_default_str();
   cmd->add_option("--overlap", flags->options.sequential.overlap,
                   "Sequential: match each frame with this many previous frames")
       ->capture_default_str();
@@ -53,6 +67,7 @@ MatchOptions MatchFlags::Resolve() const {
   MatchOptions resolved = options;
   resolved.strategy = ParsePairStrategy(pairs.empty() ? "sequential" : pairs);
   if (mutual) resolved.matcher.cross_check = true;
+  if (!vocab.empty()) resolved.vocab_path = vocab;
   resolved.num_threads = Common().threads;
   resolved.show_progress = !Common().quiet;
   resolved.Check();

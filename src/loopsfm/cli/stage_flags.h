@@ -26,6 +26,7 @@ struct MatchFlags {
   std::string pairs;
   MatchOptions options;
   bool mutual = false;
+  std::string vocab;
   MatchOptions Resolve() const;
 };
 void AddMatchFlags(CLI::App* cmd, MatchFlags* flags);

@@ -16,14 +16,16 @@ namespace loopsfm {
 PairStrategy ParsePairStrategy(const std::string& name) {
   if (name == "exhaustive") return PairStrategy::kExhaustive;
   if (name == "sequential") return PairStrategy::kSequential;
-  throw InvalidArgument(
-      fmt::format("unknown pairing strategy '{}'; choose exhaustive or sequential", name));
+  if (name == "vocabtree") return PairStrategy::kVocabTree;
+  throw InvalidArgument(fmt::format(
+      "unknown pairing strategy '{}'; choose exhaustive, sequential or vocabtree", name));
 }
 
 std::string PairStrategyName(PairStrategy strategy) {
   switch (strategy) {
     case PairStrategy::kExhaustive: return "exhaustive";
     case PairStrategy::kSequential: return "sequential";
+    case PairStrategy::kVocabTree: return "vocabtree";
   }
   return "?";
 }
@@ -35,6 +37,8 @@ void MatchOptions::Check() const {
   LOOPSFM_REQUIRE_OPTION(num_threads >= 0, "--threads must be 0 (all cores) or positive, got {}",
                          num_threads);
   LOOPSFM_REQUIRE_OPTION(batch_size > 0, "batch size must be positive, got {}", batch_size);
+  vocab_tree.Check();
+  guided.Check();
 }
 
 std::vector<Frame> FramesInCaptureOrder(const Database& database) {
@@ -62,97 +66,112 @@ struct PairResult {
 
 }  // namespace
 
-MatchReport MatchPairs(Database& database, const MatchOptions& options) {
-  options.Check();
-  Timer timer;
-  MatchReport report;
-  const std::vector<Frame> frames = FramesInCaptureOrder(database);
-  std::vector<image_t> ordered_ids;
-  std::unordered_map<image_t, camera_t> camera_of;
-  for (const Frame& frame : frames) {
-    ordered_ids.push_back(frame.image_id);
-    camera_of[frame.image_id] = frame.camera_id;
-  }
-  std::unordered_map<camera_t, Camera> cameras;
-  for (const Camera& camera : database.ReadCameras()) cameras[camera.camera_id] = camera;
+PairMatcher::PairMatcher(Database& database, const MatchOptions& options)
+    : database_(database), options_(options), random_(options.seed) {
+  for (const Frame& frame : database.ReadFrames()) camera_of_[frame.image_id] = frame.camera_id;
+  for (const Camera& camera : database.ReadCameras()) cameras_[camera.camera_id] = camera;
+}
 
-  const std::vector<ImagePair> all_pairs = options.strategy == PairStrategy::kExhaustive
-                                               ? ExhaustivePairs(ordered_ids)
-                                               : SequentialPairs(ordered_ids, options.sequential);
-  report.num_pairs = all_pairs.size();
-  std::vector<ImagePair> pairs;
-  for (const ImagePair& pair : all_pairs) {
-    if (database.ExistsMatches(pair.image_id1, pair.image_id2)) {
-      ++report.num_pairs_resumed;
+std::vector<bool> PairMatcher::Match(const std::vector<ImagePair>& all_pairs, MatchReport* report) {
+  Timer timer;
+  std::vector<bool> verified(all_pairs.size(), false);
+  std::vector<size_t> todo;
+  for (size_t i = 0; i < all_pairs.size(); ++i) {
+    const ImagePair& pair = all_pairs[i];
+    if (database_.ExistsMatches(pair.image_id1, pair.image_id2)) {
+      ++report->num_pairs_resumed;
+      const auto geometry = database_.ReadTwoViewGeometry(pair.image_id1, pair.image_id2);
+      verified[i] = geometry && geometry->IsVerified();
     } else {
-      pairs.push_back(pair);
+      todo.push_back(i);
     }
   }
-
-  const int threads = options.num_threads > 0 ? options.num_threads
-                                              : static_cast<int>(std::thread::hardware_concurrency());
+  report->num_pairs += all_pairs.size();
+  const int threads = options_.num_threads > 0
+                          ? options_.num_threads
+                          : static_cast<int>(std::thread::hardware_concurrency());
   tbb::global_control limit(tbb::global_control::max_allowed_parallelism, std::max(1, threads));
-  Progress progress("match", pairs.size(), options.show_progress);
-  const Random random(options.seed);
-  std::map<image_t, FeatureSet> cache;
-  std::vector<double> match_ms, verify_ms;
+  Progress progress("match", todo.size(), options_.show_progress && !todo.empty());
 
-  for (size_t begin = 0; begin < pairs.size(); begin += options.batch_size) {
-    const size_t end = std::min(pairs.size(), begin + options.batch_size);
+  for (size_t begin = 0; begin < todo.size(); begin += options_.batch_size) {
+    const size_t end = std::min(todo.size(), begin + options_.batch_size);
     // Load the features this batch needs; drop the ones it does not.
     Timer load_timer;
     std::unordered_set<image_t> needed;
-    for (size_t i = begin; i < end; ++i) {
-      needed.insert(pairs[i].image_id1);
-      needed.insert(pairs[i].image_id2);
+    for (size_t k = begin; k < end; ++k) {
+      needed.insert(all_pairs[todo[k]].image_id1);
+      needed.insert(all_pairs[todo[k]].image_id2);
     }
-    for (auto it = cache.begin(); it != cache.end();) {
-      it = needed.count(it->first) ? std::next(it) : cache.erase(it);
+    for (auto it = cache_.begin(); it != cache_.end();) {
+      it = needed.count(it->first) ? std::next(it) : cache_.erase(it);
     }
     for (image_t id : needed) {
-      if (!cache.count(id)) cache.emplace(id, database.ReadFeatures(id));
+      if (!cache_.count(id)) cache_.emplace(id, database_.ReadFeatures(id));
     }
-    report.load_seconds += load_timer.ElapsedSeconds();
+    report->load_seconds += load_timer.ElapsedSeconds();
 
     std::vector<PairResult> results(end - begin);
     tbb::parallel_for(size_t{0}, end - begin, [&](size_t k) {
-      const ImagePair& pair = pairs[begin + k];
-      const FeatureSet& f1 = cache.at(pair.image_id1);
-      const FeatureSet& f2 = cache.at(pair.image_id2);
+      const ImagePair& pair = all_pairs[todo[begin + k]];
+      const FeatureSet& f1 = cache_.at(pair.image_id1);
+      const FeatureSet& f2 = cache_.at(pair.image_id2);
       PairResult& result = results[k];
       Timer pair_timer;
-      result.matches = MatchDescriptors(f1.descriptors, f2.descriptors, options.matcher);
+      result.matches = MatchDescriptors(f1.descriptors, f2.descriptors, options_.matcher);
       result.match_ms = pair_timer.ElapsedMillis();
       pair_timer.Restart();
-      Random pair_random = random.Derive(PairToPairId(pair));
+      Random pair_random = random_.Derive(PairToPairId(pair));
       result.verification = VerifyTwoViewGeometry(
-          cameras.at(camera_of.at(pair.image_id1)), f1.keypoints,
-          cameras.at(camera_of.at(pair.image_id2)), f2.keypoints, result.matches,
-          options.verification, pair_random);
+          cameras_.at(camera_of_.at(pair.image_id1)), f1.keypoints,
+          cameras_.at(camera_of_.at(pair.image_id2)), f2.keypoints, result.matches,
+          options_.verification, pair_random);
       result.verify_ms = pair_timer.ElapsedMillis();
       progress.Advance();
     });
 
-    Database::Transaction transaction(database);
+    Database::Transaction transaction(database_);
     for (size_t k = 0; k < results.size(); ++k) {
-      const ImagePair& pair = pairs[begin + k];
+      const ImagePair& pair = all_pairs[todo[begin + k]];
       const PairResult& result = results[k];
-      database.WriteMatches(pair.image_id1, pair.image_id2, result.matches);
-      database.WriteTwoViewGeometry(pair.image_id1, pair.image_id2, result.verification.geometry);
-      ++report.num_pairs_matched;
-      report.num_raw_matches += result.matches.size();
+      database_.WriteMatches(pair.image_id1, pair.image_id2, result.matches);
+      database_.WriteTwoViewGeometry(pair.image_id1, pair.image_id2, result.verification.geometry);
+      ++report->num_pairs_matched;
+      report->num_raw_matches += result.matches.size();
       if (result.verification.geometry.IsVerified()) {
-        ++report.num_pairs_verified;
-        report.num_inliers += result.verification.geometry.inlier_matches.size();
+        verified[todo[begin + k]] = true;
+        ++report->num_pairs_verified;
+        report->num_inliers += result.verification.geometry.inlier_matches.size();
       }
-      match_ms.push_back(result.match_ms);
-      verify_ms.push_back(result.verify_ms);
+      match_ms_.push_back(result.match_ms);
+      verify_ms_.push_back(result.verify_ms);
     }
     transaction.Commit();
   }
   progress.Finish();
-  report.median_match_ms = Median(match_ms);
-  report.median_verify_ms = Median(verify_ms);
+  report->median_match_ms = Median(match_ms_);
+  report->median_verify_ms = Median(verify_ms_);
+  report->seconds += timer.ElapsedSeconds();
+  return verified;
+}
+
+MatchReport MatchPairs(Database& database, const MatchOptions& options) {
+  options.Check();
+  Timer timer;
+  MatchReport report;
+  std::vector<image_t> ordered_ids;
+  for (const Frame& frame : FramesInCaptureOrder(database)) ordered_ids.push_back(frame.image_id);
+  PairMatcher matcher(database, options);
+  switch (options.strategy) {
+    case PairStrategy::kExhaustive:
+      matcher.Match(ExhaustivePairs(ordered_ids), &report);
+      break;
+    case PairStrategy::kSequential:
+      matcher.Match(SequentialPairs(ordered_ids, options.sequential), &report);
+      break;
+    case PairStrategy::kVocabTree:
+      MatchVocabTreeGuided(database, ordered_ids, options, matcher, &report);
+      break;
+  }
   report.seconds = timer.ElapsedSeconds();
   return report;
 }

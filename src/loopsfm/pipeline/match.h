@@ -7,7 +7,13 @@
 #include <string>
 #include <vector>
 
+#include <filesystem>
+#include <map>
+#include <unordered_map>
+
 #include "loopsfm/matching/descriptor_matcher.h"
+#include "loopsfm/matching/guided_pairing.h"
+#include "loopsfm/retrieval/vocabulary_tree.h"
 #include "loopsfm/matching/geometric_verification.h"
 #include "loopsfm/matching/pair_selection.h"
 #include "loopsfm/storage/database.h"
@@ -15,9 +21,11 @@
 
 namespace loopsfm {
 
-enum class PairStrategy { kExhaustive, kSequential };
+// exhaustive: every pair; sequential: each frame with its K previous ones; vocabtree:
+// sequential neighbours, then vocabulary-tree guided rounds with region growing (loops).
+enum class PairStrategy { kExhaustive, kSequential, kVocabTree };
 
-// Parses "exhaustive" | "sequential"; throws InvalidArgument naming the valid choices.
+// Parses "exhaustive" | "sequential" | "vocabtree"; throws InvalidArgument naming the choices.
 PairStrategy ParsePairStrategy(const std::string& name);
 std::string PairStrategyName(PairStrategy strategy);
 
@@ -30,6 +38,16 @@ struct MatchOptions {
   DescriptorMatchingOptions matcher;
   // RANSAC verification.
   TwoViewVerificationOptions verification;
+  // Vocabulary tree trained on the scene's own descriptors (when no vocab_path is given).
+  VocabTreeOptions vocab_tree;
+  // A tree saved by `loopsfm vocab build`, used instead of training one.
+  std::filesystem::path vocab_path;
+  // Guided rounds: proposals per round and the stop rule.
+  GuidedPairingOptions guided;
+  // Vocabtree: match sequential neighbours first (video frames are ordered).
+  bool vocab_include_sequential = true;
+  // Vocabtree: write the similarity and match matrices as PNG next to the database.
+  bool write_matrix_images = true;
   // Worker threads (0: all cores).
   int num_threads = 0;
   // Pairs processed per batch (bounds the descriptors held in memory).
@@ -39,6 +57,15 @@ struct MatchOptions {
   // Show progress on stderr.
   bool show_progress = true;
   void Check() const;
+};
+
+// Timings of the vocabulary-tree strategy (on top of matching).
+struct VocabTreeTimings {
+  double build_seconds = 0.0;    // sampling descriptors and training (or loading) the tree
+  double score_seconds = 0.0;    // quantising all frames and the similarity matrix
+  double propose_seconds = 0.0;  // choosing pairs in the guided rounds
+  double match_seconds = 0.0;    // matching and verifying the proposed pairs
+  GuidedPairingReport guided;
 };
 
 struct MatchReport {
@@ -53,12 +80,36 @@ struct MatchReport {
   // Per matched pair: descriptor matching time (median, ms) and verification time.
   double median_match_ms = 0.0;
   double median_verify_ms = 0.0;
+  // Filled by the vocabtree strategy.
+  VocabTreeTimings vocab;
   double MeanInliers() const {
     return num_pairs_verified ? double(num_inliers) / num_pairs_verified : 0.0;
   }
 };
 
 MatchReport MatchPairs(Database& database, const MatchOptions& options);
+
+// Matches and verifies lists of pairs on demand, storing results; pairs already stored are
+// read back instead of matched again. Holds a bounded cache of features.
+class PairMatcher {
+ public:
+  PairMatcher(Database& database, const MatchOptions& options);
+  // One flag per pair: verified (now or before).
+  std::vector<bool> Match(const std::vector<ImagePair>& pairs, MatchReport* report);
+
+ private:
+  Database& database_;
+  const MatchOptions& options_;
+  Random random_;
+  std::unordered_map<image_t, camera_t> camera_of_;
+  std::unordered_map<camera_t, Camera> cameras_;
+  std::map<image_t, FeatureSet> cache_;
+  std::vector<double> match_ms_, verify_ms_;
+};
+
+// The vocabtree strategy: sequential neighbours, then guided rounds (see guided_pairing.h).
+void MatchVocabTreeGuided(Database& database, const std::vector<image_t>& ordered_ids,
+                          const MatchOptions& options, PairMatcher& matcher, MatchReport* report);
 
 // Frames in capture order (by name: frame_%06d for video, file names for folders).
 std::vector<Frame> FramesInCaptureOrder(const Database& database);

@@ -1,0 +1,148 @@
+// The vocabtree pairing strategy: sequential neighbours first, then rounds of pairs proposed
+// by the vocabulary tree's similarity matrix and grown around verified pairs.
+
+#include <filesystem>
+
+#include <opencv2/core.hpp>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include "loopsfm/pipeline/match.h"
+#include "loopsfm/retrieval/image_database.h"
+#include "loopsfm/util/errors.h"
+#include "loopsfm/util/logging.h"
+#include "loopsfm/util/timer.h"
+
+namespace loopsfm {
+namespace {
+
+using BoolMatrix = Eigen::Matrix<bool, Eigen::Dynamic, Eigen::Dynamic>;
+
+// Trains a tree on a bounded sample: an equal share of random descriptors of every frame,
+// read one frame at a time.
+VocabularyTree TrainSceneTree(const Database& database, const std::vector<image_t>& ids,
+                              const VocabTreeOptions& options, Random& random) {
+  const size_t per_frame =
+      std::max<size_t>(1, options.max_training_descriptors / std::max<size_t>(1, ids.size()));
+  std::vector<FeatureDescriptors> samples;
+  size_t total = 0;
+  for (image_t id : ids) {
+    const FeatureDescriptors all = database.ReadDescriptors(id);
+    const auto rows = random.Sample(static_cast<uint32_t>(all.rows()),
+                                    static_cast<uint32_t>(std::min<size_t>(per_frame, all.rows())));
+    FeatureDescriptors sample(rows.size(), kDescriptorDim);
+    for (size_t r = 0; r < rows.size(); ++r) sample.row(r) = all.row(rows[r]);
+    total += sample.rows();
+    samples.push_back(std::move(sample));
+  }
+  FeatureDescriptors training(total, kDescriptorDim);
+  size_t row = 0;
+  for (const auto& sample : samples) {
+    training.middleRows(row, sample.rows()) = sample;
+    row += sample.rows();
+  }
+  return VocabularyTree::Train(training, options, random);
+}
+
+// A colour-mapped picture of a matrix, normalised to its largest value.
+void WriteMatrixPng(const Eigen::MatrixXf& matrix, const std::filesystem::path& path) {
+  if (matrix.size() == 0) return;
+  const float max = std::max(matrix.maxCoeff(), 1e-12f);
+  cv::Mat grey(static_cast<int>(matrix.rows()), static_cast<int>(matrix.cols()), CV_8U);
+  for (int i = 0; i < grey.rows; ++i) {
+    for (int j = 0; j < grey.cols; ++j) {
+      grey.at<uint8_t>(i, j) = static_cast<uint8_t>(std::clamp(255.0f * matrix(i, j) / max, 0.0f, 255.0f));
+    }
+  }
+  const int scale = std::max(1, 600 / std::max(1, grey.rows));
+  cv::resize(grey, grey, cv::Size(), scale, scale, cv::INTER_NEAREST);
+  cv::Mat colour;
+  cv::applyColorMap(grey, colour, cv::COLORMAP_VIRIDIS);
+  if (!cv::imwrite(path.string(), colour)) spdlog::warn("could not write {}", path.string());
+}
+
+}  // namespace
+
+void MatchVocabTreeGuided(Database& database, const std::vector<image_t>& ordered_ids,
+                          const MatchOptions& options, PairMatcher& matcher, MatchReport* report) {
+  const int n = static_cast<int>(ordered_ids.size());
+  std::unordered_map<image_t, int> index_of;
+  for (int i = 0; i < n; ++i) index_of[ordered_ids[i]] = i;
+  BoolMatrix tried = BoolMatrix::Constant(n, n, false), verified = tried;
+  auto record = [&](const std::vector<ImagePair>& pairs, const std::vector<bool>& ok) {
+    for (size_t k = 0; k < pairs.size(); ++k) {
+      const int i = index_of.at(pairs[k].image_id1), j = index_of.at(pairs[k].image_id2);
+      tried(i, j) = tried(j, i) = true;
+      verified(i, j) = verified(j, i) = ok[k];
+    }
+  };
+  Timer timer;
+  if (options.vocab_include_sequential) {
+    const auto pairs = SequentialPairs(ordered_ids, options.sequential);
+    record(pairs, matcher.Match(pairs, report));
+  }
+  // Pairs stored by earlier runs (any strategy) count as tried.
+  for (const ImagePair& pair : database.ReadAllMatchedPairs()) {
+    if (index_of.count(pair.image_id1) && index_of.count(pair.image_id2)) {
+      const int i = index_of.at(pair.image_id1), j = index_of.at(pair.image_id2);
+      tried(i, j) = tried(j, i) = true;
+    }
+  }
+  for (const VerifiedPair& pair : database.ReadVerifiedPairs()) {
+    if (index_of.count(pair.pair.image_id1) && index_of.count(pair.pair.image_id2)) {
+      const int i = index_of.at(pair.pair.image_id1), j = index_of.at(pair.pair.image_id2);
+      verified(i, j) = verified(j, i) = true;
+    }
+  }
+  report->vocab.match_seconds += timer.ElapsedSeconds();
+
+  timer.Restart();
+  Random random(options.seed);
+  const VocabularyTree tree = options.vocab_path.empty()
+                                  ? TrainSceneTree(database, ordered_ids, options.vocab_tree, random)
+                                  : VocabularyTree::Load(options.vocab_path);
+  report->vocab.build_seconds = timer.ElapsedSeconds();
+
+  timer.Restart();
+  ImageDatabase images(tree.NumWords());
+  for (image_t id : ordered_ids) images.AddImage(id, tree.QuantizeAll(database.ReadDescriptors(id)));
+  images.Finalize();
+  const Eigen::MatrixXf scores = images.SimilarityMatrix();
+  report->vocab.score_seconds = timer.ElapsedSeconds();
+  spdlog::info("vocabtree: {} words, {:.1f} s tree, {:.1f} s scoring", tree.NumWords(),
+               report->vocab.build_seconds, report->vocab.score_seconds);
+
+  double match_seconds = 0.0;
+  Timer rounds_timer;
+  auto verify = [&](const std::vector<ImagePair>& pairs) {
+    Timer match_timer;
+    std::vector<bool> ok = matcher.Match(pairs, report);
+    match_seconds += match_timer.ElapsedSeconds();
+    return ok;
+  };
+  report->vocab.guided = RunGuidedPairing(scores, ordered_ids, options.guided, verify, &tried, &verified);
+  report->vocab.match_seconds += match_seconds;
+  report->vocab.propose_seconds = rounds_timer.ElapsedSeconds() - match_seconds;
+  for (size_t r = 0; r < report->vocab.guided.rounds.size(); ++r) {
+    const auto& round = report->vocab.guided.rounds[r];
+    spdlog::info("vocabtree round {}: {} proposed ({} by score, {} by region growing), {} verified",
+                 r + 1, round.NumProposed(), round.num_from_scores, round.num_from_growing,
+                 round.num_verified);
+  }
+
+  if (options.write_matrix_images) {
+    const std::filesystem::path db_path(database.Path());
+    Eigen::MatrixXf similarity = scores;
+    similarity.diagonal().setZero();
+    WriteMatrixPng(similarity, db_path.parent_path() / (db_path.stem().string() + "_similarity.png"));
+    Eigen::MatrixXf inliers = Eigen::MatrixXf::Zero(n, n);
+    for (const VerifiedPair& pair : database.ReadVerifiedPairs()) {
+      if (!index_of.count(pair.pair.image_id1) || !index_of.count(pair.pair.image_id2)) continue;
+      const int i = index_of.at(pair.pair.image_id1), j = index_of.at(pair.pair.image_id2);
+      inliers(i, j) = inliers(j, i) = static_cast<float>(pair.num_inliers);
+    }
+    WriteMatrixPng(inliers, db_path.parent_path() / (db_path.stem().string() + "_matches.png"));
+  }
+}
+
+}  // namespace loopsfm

@@ -1,0 +1,281 @@
+#include "loopsfm/retrieval/image_database.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
+#include "loopsfm/util/errors.h"
+
+namespace loopsfm {
+namespace {
+
+constexpr uint32_t kNoIndex = std::numeric_limits<uint32_t>::max();
+
+// Sorted distinct words with their counts.
+void CountWords(std::vector<uint32_t> words, int num_words, std::vector<uint32_t>& distinct,
+                std::vector<float>& counts) {
+  std::sort(words.begin(), words.end());
+  for (size_t i = 0; i < words.size();) {
+    if (words[i] >= static_cast<uint32_t>(num_words)) {
+      throw InvalidArgument(fmt::format("visual word {} is out of range: the database has {} words "
+                                        "(was the image quantised with another tree?)",
+                                        words[i], num_words));
+    }
+    size_t j = i + 1;
+    while (j < words.size() && words[j] == words[i]) ++j;
+    distinct.push_back(words[i]);
+    counts.push_back(static_cast<float>(j - i));
+    i = j;
+  }
+}
+
+// Multiplies counts by the IDF weights, drops zeros and normalises, in place on [begin, end)
+// of (words, values); returns the new end.
+size_t WeightAndNormalise(std::vector<uint32_t>& words, std::vector<float>& values, size_t begin,
+                          size_t end, const std::vector<float>& idf, TfIdfNorm norm) {
+  size_t out = begin;
+  double total = 0;
+  for (size_t i = begin; i < end; ++i) {
+    const float weight = values[i] * idf[words[i]];
+    if (weight <= 0) continue;
+    words[out] = words[i];
+    values[out] = weight;
+    total += norm == TfIdfNorm::kL1 ? double{weight} : double{weight} * weight;
+    ++out;
+  }
+  if (total > 0) {
+    const double inv = 1.0 / (norm == TfIdfNorm::kL1 ? total : std::sqrt(total));
+    for (size_t i = begin; i < out; ++i) values[i] = static_cast<float>(values[i] * inv);
+  }
+  return out;
+}
+
+// The contribution of one shared word to a score; symmetric in its arguments, so that the
+// score of (a, b) is bit-identical to that of (b, a).
+template <TfIdfNorm kNorm>
+inline float Term(float a, float b) {
+  if constexpr (kNorm == TfIdfNorm::kL2) {
+    return a * b;
+  } else {
+    return std::min(a, b);
+  }
+}
+
+}  // namespace
+
+void ImageDatabaseOptions::Check() const {
+  LOOPSFM_REQUIRE_OPTION(norm == TfIdfNorm::kL1 || norm == TfIdfNorm::kL2,
+                         "unknown TF-IDF norm {}", static_cast<int>(norm));
+}
+
+ImageDatabase::ImageDatabase(int num_words, const ImageDatabaseOptions& options)
+    : num_words_(num_words), options_(options) {
+  options.Check();
+  LOOPSFM_REQUIRE_OPTION(num_words >= 1, "an image database needs at least one word, got {}",
+                         num_words);
+}
+
+void ImageDatabase::AddImage(image_t image_id, const std::vector<uint32_t>& words) {
+  LOOPSFM_CHECK_MSG(!finalized_, "ImageDatabase::AddImage after Finalize");
+  if (image_id == kInvalidImageId) throw InvalidArgument("cannot index kInvalidImageId");
+  if (index_of_.count(image_id)) {
+    throw InvalidArgument(fmt::format("image {} is already in the database", image_id));
+  }
+  std::vector<uint32_t> distinct;
+  std::vector<float> counts;
+  CountWords(words, num_words_, distinct, counts);
+  index_of_.emplace(image_id, static_cast<uint32_t>(image_ids_.size()));
+  image_ids_.push_back(image_id);
+  image_words_.insert(image_words_.end(), distinct.begin(), distinct.end());
+  image_values_.insert(image_values_.end(), counts.begin(), counts.end());
+  image_begin_.push_back(image_words_.size());
+}
+
+void ImageDatabase::Finalize() {
+  LOOPSFM_CHECK_MSG(!finalized_, "ImageDatabase::Finalize called twice");
+  const size_t n = image_ids_.size();
+  std::vector<uint32_t> document_frequency(num_words_, 0);
+  for (const uint32_t word : image_words_) ++document_frequency[word];
+  idf_.assign(num_words_, 0.0f);
+  for (int w = 0; w < num_words_; ++w) {
+    if (document_frequency[w] > 0) {
+      idf_[w] = static_cast<float>(std::log(static_cast<double>(n) / document_frequency[w]));
+    }
+  }
+  // Weight and normalise each image, compacting the arrays as zero weights drop out.
+  size_t out = 0;
+  for (size_t i = 0; i < n; ++i) {
+    const size_t begin = image_begin_[i], end = image_begin_[i + 1];
+    if (out != begin) {  // out < begin: a forward copy is safe
+      std::copy(image_words_.begin() + begin, image_words_.begin() + end,
+                image_words_.begin() + out);
+      std::copy(image_values_.begin() + begin, image_values_.begin() + end,
+                image_values_.begin() + out);
+    }
+    image_begin_[i] = out;
+    out = WeightAndNormalise(image_words_, image_values_, out, out + (end - begin), idf_,
+                             options_.norm);
+  }
+  image_begin_[n] = out;
+  image_words_.resize(out);
+  image_values_.resize(out);
+  image_words_.shrink_to_fit();
+  image_values_.shrink_to_fit();
+
+  // Inverted file by counting sort; images go in in index order, so each list is sorted.
+  word_begin_.assign(num_words_ + 1, 0);
+  for (const uint32_t word : image_words_) ++word_begin_[word + 1];
+  for (int w = 0; w < num_words_; ++w) word_begin_[w + 1] += word_begin_[w];
+  posting_images_.resize(out);
+  posting_weights_.resize(out);
+  std::vector<size_t> next(word_begin_.begin(), word_begin_.end() - 1);
+  for (size_t i = 0; i < n; ++i) {
+    for (size_t k = image_begin_[i]; k < image_begin_[i + 1]; ++k) {
+      const size_t slot = next[image_words_[k]]++;
+      posting_images_[slot] = static_cast<uint32_t>(i);
+      posting_weights_[slot] = image_values_[k];
+    }
+  }
+  finalized_ = true;
+}
+
+float ImageDatabase::IdfWeight(uint32_t word) const {
+  LOOPSFM_CHECK_MSG(finalized_, "ImageDatabase::IdfWeight before Finalize");
+  LOOPSFM_CHECK_LT(word, idf_.size());
+  return idf_[word];
+}
+
+uint32_t ImageDatabase::IndexOf(image_t image_id) const {
+  const auto it = index_of_.find(image_id);
+  if (it == index_of_.end()) {
+    throw InvalidArgument(fmt::format("image {} is not in the database", image_id));
+  }
+  return it->second;
+}
+
+ImageDatabase::SparseVector ImageDatabase::ImageVectorAt(uint32_t index) const {
+  const size_t begin = image_begin_[index];
+  return {image_words_.data() + begin, image_values_.data() + begin,
+          image_begin_[index + 1] - begin};
+}
+
+std::vector<std::pair<uint32_t, float>> ImageDatabase::ImageVector(image_t image_id) const {
+  LOOPSFM_CHECK_MSG(finalized_, "ImageDatabase::ImageVector before Finalize");
+  const SparseVector v = ImageVectorAt(IndexOf(image_id));
+  std::vector<std::pair<uint32_t, float>> out(v.size);
+  for (size_t i = 0; i < v.size; ++i) out[i] = {v.words[i], v.weights[i]};
+  return out;
+}
+
+void ImageDatabase::Score(const SparseVector& query, uint32_t first_index, float* scores) const {
+  auto accumulate = [&]<TfIdfNorm kNorm>() {
+    for (size_t i = 0; i < query.size; ++i) {
+      const float q = query.weights[i];
+      const uint32_t* images = posting_images_.data();
+      size_t begin = word_begin_[query.words[i]];
+      const size_t end = word_begin_[query.words[i] + 1];
+      if (first_index > 0) {
+        begin = std::lower_bound(images + begin, images + end, first_index) - images;
+      }
+      for (size_t k = begin; k < end; ++k) {
+        scores[images[k]] += Term<kNorm>(q, posting_weights_[k]);
+      }
+    }
+  };
+  if (options_.norm == TfIdfNorm::kL2) {
+    accumulate.template operator()<TfIdfNorm::kL2>();
+  } else {
+    accumulate.template operator()<TfIdfNorm::kL1>();
+  }
+}
+
+std::vector<ImageScore> ImageDatabase::Rank(const std::vector<float>& scores, uint32_t exclude,
+                                            int max_results) const {
+  std::vector<uint32_t> candidates;
+  for (uint32_t i = 0; i < scores.size(); ++i) {
+    if (scores[i] > 0 && i != exclude) candidates.push_back(i);
+  }
+  const auto better = [&](uint32_t a, uint32_t b) {
+    return scores[a] > scores[b] || (scores[a] == scores[b] && a < b);
+  };
+  const size_t count = max_results > 0 ? std::min<size_t>(max_results, candidates.size())
+                                       : candidates.size();
+  std::partial_sort(candidates.begin(), candidates.begin() + count, candidates.end(), better);
+  std::vector<ImageScore> ranked(count);
+  for (size_t i = 0; i < count; ++i) ranked[i] = {image_ids_[candidates[i]], scores[candidates[i]]};
+  return ranked;
+}
+
+std::vector<ImageScore> ImageDatabase::Query(image_t image_id, int max_results) const {
+  LOOPSFM_CHECK_MSG(finalized_, "ImageDatabase::Query before Finalize");
+  const uint32_t index = IndexOf(image_id);
+  std::vector<float> scores(image_ids_.size(), 0.0f);
+  Score(ImageVectorAt(index), 0, scores.data());
+  return Rank(scores, index, max_results);
+}
+
+std::vector<ImageScore> ImageDatabase::Query(const std::vector<uint32_t>& words,
+                                             int max_results) const {
+  LOOPSFM_CHECK_MSG(finalized_, "ImageDatabase::Query before Finalize");
+  std::vector<uint32_t> distinct;
+  std::vector<float> values;
+  CountWords(words, num_words_, distinct, values);
+  const size_t size = WeightAndNormalise(distinct, values, 0, distinct.size(), idf_, options_.norm);
+  std::vector<float> scores(image_ids_.size(), 0.0f);
+  Score({distinct.data(), values.data(), size}, 0, scores.data());
+  return Rank(scores, kNoIndex, max_results);
+}
+
+std::vector<std::vector<ImageScore>> ImageDatabase::QueryAll(int max_results) const {
+  LOOPSFM_CHECK_MSG(finalized_, "ImageDatabase::QueryAll before Finalize");
+  std::vector<std::vector<ImageScore>> results(image_ids_.size());
+  tbb::parallel_for(size_t{0}, image_ids_.size(), [&](size_t i) {
+    std::vector<float> scores(image_ids_.size(), 0.0f);
+    Score(ImageVectorAt(static_cast<uint32_t>(i)), 0, scores.data());
+    results[i] = Rank(scores, static_cast<uint32_t>(i), max_results);
+  });
+  return results;
+}
+
+Eigen::MatrixXf ImageDatabase::SimilarityMatrix() const {
+  LOOPSFM_CHECK_MSG(finalized_, "ImageDatabase::SimilarityMatrix before Finalize");
+  const int64_t n = NumImages();
+  Eigen::MatrixXf similarity = Eigen::MatrixXf::Zero(n, n);
+  // Column j gets the scores with the images after j (each shared word once per pair), then the
+  // upper triangle is mirrored. Columns are independent, so any thread count gives the same.
+  tbb::parallel_for(tbb::blocked_range<int64_t>(0, n, 1), [&](const auto& range) {
+    for (int64_t j = range.begin(); j < range.end(); ++j) {
+      const SparseVector v = ImageVectorAt(static_cast<uint32_t>(j));
+      Score(v, static_cast<uint32_t>(j + 1), similarity.col(j).data());
+      float self = 0;
+      for (size_t i = 0; i < v.size; ++i) {
+        self += options_.norm == TfIdfNorm::kL2 ? v.weights[i] * v.weights[i] : v.weights[i];
+      }
+      similarity(j, j) = self;
+    }
+  });
+  for (int64_t j = 0; j < n; ++j) {
+    for (int64_t i = j + 1; i < n; ++i) similarity(j, i) = similarity(i, j);
+  }
+  return similarity;
+}
+
+ImageDatabase BuildImageDatabase(const VocabularyTree& tree, const std::vector<image_t>& image_ids,
+                                 const std::vector<const FeatureDescriptors*>& descriptors,
+                                 const ImageDatabaseOptions& options) {
+  LOOPSFM_CHECK_EQ(image_ids.size(), descriptors.size());
+  std::vector<std::vector<uint32_t>> words(image_ids.size());
+  tbb::parallel_for(size_t{0}, image_ids.size(), [&](size_t i) {
+    LOOPSFM_CHECK(descriptors[i] != nullptr);
+    words[i] = tree.QuantizeAll(*descriptors[i]);
+  });
+  ImageDatabase database(tree.NumWords(), options);
+  for (size_t i = 0; i < image_ids.size(); ++i) database.AddImage(image_ids[i], words[i]);
+  database.Finalize();
+  return database;
+}
+
+}  // namespace loopsfm

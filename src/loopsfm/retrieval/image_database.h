@@ -1,0 +1,126 @@
+#pragma once
+// Image retrieval with visual words (Nister & Stewenius 2006): every image becomes a sparse
+// TF-IDF vector over the words of a vocabulary tree, normalised to unit length, and images are
+// scored against each other through an inverted file (word -> images containing it), so a
+// query touches only the images that share a word with it.
+//
+// Weighting: the entry of word i in image d is  tf * idf = n_id * log(N / N_i),  n_id the number
+// of descriptors of d quantised to i, N the number of indexed images, N_i those containing i.
+// Words present in every image get weight 0 and drop out (they tell images apart no better than
+// chance). Scores lie in [0, 1], 1 for identical vectors:
+//   kL2: vectors L2-normalised, score = dot product (cosine similarity);
+//   kL1: vectors L1-normalised, score = sum_i min(q_i, d_i) = 1 - |q - d|_1 / 2, the L1
+//        distance Nister & Stewenius score with, computed through the inverted file.
+//
+// Typical use:
+//   ImageDatabase database(tree.NumWords());
+//   for (...) database.AddImage(image_id, tree.QuantizeAll(descriptors));
+//   database.Finalize();
+//   Eigen::MatrixXf similarity = database.SimilarityMatrix();
+// or BuildImageDatabase() below, which quantises in parallel.
+
+#include <cstdint>
+#include <unordered_map>
+#include <utility>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "loopsfm/retrieval/vocabulary_tree.h"
+#include "loopsfm/scene/features.h"
+#include "loopsfm/util/types.h"
+
+namespace loopsfm {
+
+enum class TfIdfNorm { kL1, kL2 };
+
+struct ImageDatabaseOptions {
+  // Normalisation of the TF-IDF vectors, which also picks the score (see the file comment).
+  TfIdfNorm norm = TfIdfNorm::kL2;
+  // Throws loopsfm::InvalidArgument with a readable message.
+  void Check() const;
+};
+
+struct ImageScore {
+  image_t image_id = kInvalidImageId;
+  float score = 0;
+  friend bool operator==(const ImageScore&, const ImageScore&) = default;
+};
+
+class ImageDatabase {
+ public:
+  // A database over word ids 0 .. num_words - 1 (VocabularyTree::NumWords()).
+  explicit ImageDatabase(int num_words, const ImageDatabaseOptions& options = {});
+
+  // Adds an image by the words of its descriptors (in any order, repeats counted). Throws
+  // InvalidArgument for a repeated or invalid image id or a word >= num_words.
+  // Must come before Finalize().
+  void AddImage(image_t image_id, const std::vector<uint32_t>& words);
+  // Computes the IDF weights over the added images, the normalised vectors and the inverted
+  // file. Queries need it; images cannot be added afterwards.
+  void Finalize();
+  bool IsFinalized() const { return finalized_; }
+
+  int NumImages() const { return static_cast<int>(image_ids_.size()); }
+  int NumWords() const { return num_words_; }
+  // Image ids in the order they were added: the row / column order of SimilarityMatrix().
+  const std::vector<image_t>& ImageIds() const { return image_ids_; }
+  // log(N / N_i), or 0 for a word in no image or in every image. After Finalize().
+  float IdfWeight(uint32_t word) const;
+  // An image's normalised TF-IDF vector as (word, weight), sorted by word, zeros left out.
+  std::vector<std::pair<uint32_t, float>> ImageVector(image_t image_id) const;
+
+  // The images most similar to an indexed image, best first (ties: earlier added first),
+  // the image itself left out; at most max_results (all when max_results <= 0), and only
+  // images with a positive score. Throws InvalidArgument for an unknown id.
+  std::vector<ImageScore> Query(image_t image_id, int max_results) const;
+  // The same for an image outside the database, given by its words; words in no indexed image
+  // carry no weight.
+  std::vector<ImageScore> Query(const std::vector<uint32_t>& words, int max_results) const;
+  // Query(id, max_results) for every image, in the order of ImageIds(), in parallel.
+  std::vector<std::vector<ImageScore>> QueryAll(int max_results) const;
+  // n x n symmetric scores in the order of ImageIds(), computed through the inverted file;
+  // the diagonal holds each image's score with itself (1 up to rounding; 0 for an image
+  // without weighted words). Entries equal the scores Query returns. Memory is 4 n^2 bytes:
+  // prefer QueryAll for many thousands of images.
+  Eigen::MatrixXf SimilarityMatrix() const;
+
+ private:
+  struct SparseVector {
+    const uint32_t* words;
+    const float* weights;
+    size_t size;
+  };
+  SparseVector ImageVectorAt(uint32_t index) const;
+  uint32_t IndexOf(image_t image_id) const;
+  // Scores of every indexed image against `query` into scores[0 .. n), only for images with
+  // index >= first_index.
+  void Score(const SparseVector& query, uint32_t first_index, float* scores) const;
+  std::vector<ImageScore> Rank(const std::vector<float>& scores, uint32_t exclude,
+                               int max_results) const;
+
+  int num_words_;
+  ImageDatabaseOptions options_;
+  bool finalized_ = false;
+  std::vector<image_t> image_ids_;
+  std::unordered_map<image_t, uint32_t> index_of_;
+  // Per image, (word, value) sorted by word in image_begin_[i] .. image_begin_[i + 1]: term
+  // counts before Finalize(), normalised TF-IDF weights after (zero weights dropped).
+  std::vector<size_t> image_begin_ = {0};
+  std::vector<uint32_t> image_words_;
+  std::vector<float> image_values_;
+  // After Finalize(): IDF per word, and the inverted file: per word, (image index, weight)
+  // sorted by image index in word_begin_[w] .. word_begin_[w + 1].
+  std::vector<float> idf_;
+  std::vector<size_t> word_begin_;
+  std::vector<uint32_t> posting_images_;
+  std::vector<float> posting_weights_;
+};
+
+// Quantises every image's descriptors with the tree (images in parallel) and returns the
+// finalised database. ids and descriptors run in parallel (same length).
+ImageDatabase BuildImageDatabase(const VocabularyTree& tree, const std::vector<image_t>& image_ids,
+                                 const std::vector<const FeatureDescriptors*>& descriptors,
+                                 const ImageDatabaseOptions& options = {});
+
+}  // namespace loopsfm
