@@ -12,10 +12,10 @@
 // quality is precision@5: over frames, the fraction of the 5 best-scoring other frames that are
 // temporal neighbours (|i - j| <= 3), for L1 and L2 normalised TF-IDF vectors. With two or more
 // folders the tree of the first is also used on the others ("generic tree" rows).
-// Where a groundtruth.txt lies beside the frames, loop recall@5 is reported too: over frames
+// Where a groundtruth.txt lies beside the frames, loop recall@1 is reported too: over frames
 // that revisit a place (another frame more than 30 frames away has its centre within 5 median
-// frame steps and its optical axis within 30 degrees), the fraction whose 5 best-scoring
-// frames more than 30 frames away include such a revisit.
+// frame steps and its optical axis within 30 degrees), the fraction whose best-scoring frame
+// more than 30 frames away is such a revisit.
 
 #include <algorithm>
 #include <cstdio>
@@ -176,23 +176,19 @@ double PrecisionAt5(const ImageDatabase& database) {
   return sum / static_cast<double>(results.size());
 }
 
-// Loop recall@5 (see the file comment); -1 without ground truth or revisits.
-double LoopRecallAt5(const ImageDatabase& database, const std::vector<std::vector<int>>& revisits) {
+// Loop recall@1 (see the file comment); -1 without ground truth or revisits.
+double LoopRecallAt1(const ImageDatabase& database, const std::vector<std::vector<int>>& revisits) {
   if (revisits.size() != static_cast<size_t>(database.NumImages())) return -1;
   int loops = 0, hits = 0;
   const auto results = database.QueryAll(0);
   for (size_t i = 0; i < revisits.size(); ++i) {
     if (revisits[i].empty()) continue;
     ++loops;
-    int considered = 0;
     for (const ImageScore& s : results[i]) {
       const int j = static_cast<int>(s.image_id);
       if (std::abs(j - static_cast<int>(i)) <= 30) continue;
-      if (std::find(revisits[i].begin(), revisits[i].end(), j) != revisits[i].end()) {
-        ++hits;
-        break;
-      }
-      if (++considered == 5) break;
+      hits += std::find(revisits[i].begin(), revisits[i].end(), j) != revisits[i].end();
+      break;
     }
   }
   return loops > 0 ? static_cast<double>(hits) / loops : -1;
@@ -209,6 +205,26 @@ Row Evaluate(const VocabularyTree& tree, const Sequence& sequence) {
   Timer timer;
   for (size_t i = 0; i < words.size(); ++i) words[i] = tree.QuantizeAll(sequence.descriptors[i]);
   row.quantize_ms_per_frame = timer.ElapsedMillis() / static_cast<double>(words.size());
+  if (std::getenv("STUDY_STATS")) {
+    std::vector<int> postings(tree.NumWords(), 0);
+    double distinct = 0;
+    for (auto w : words) {
+      std::sort(w.begin(), w.end());
+      w.erase(std::unique(w.begin(), w.end()), w.end());
+      distinct += w.size();
+      for (uint32_t x : w) ++postings[x];
+    }
+    double pair_ops = 0;
+    int over_eighth = 0, max_postings = 0;
+    for (int p : postings) {
+      pair_ops += 0.5 * p * p;
+      over_eighth += p * 8 > static_cast<int>(words.size());
+      max_postings = std::max(max_postings, p);
+    }
+    std::printf("  stats: %.0f distinct words per frame, %.3g pair-ops, %d words in > 1/8 of the "
+                "frames, max %d frames\n",
+                distinct / words.size(), pair_ops, over_eighth, max_postings);
+  }
   for (const TfIdfNorm norm : {TfIdfNorm::kL1, TfIdfNorm::kL2}) {
     ImageDatabaseOptions options;
     options.norm = norm;
@@ -220,7 +236,7 @@ Row Evaluate(const VocabularyTree& tree, const Sequence& sequence) {
     if (norm == TfIdfNorm::kL1) row.similarity_ms = timer.ElapsedMillis();
     const int n = norm == TfIdfNorm::kL1 ? 0 : 1;
     row.precision[n] = PrecisionAt5(database);
-    row.loop_recall[n] = LoopRecallAt5(database, sequence.revisits);
+    row.loop_recall[n] = LoopRecallAt1(database, sequence.revisits);
   }
   return row;
 }
@@ -281,7 +297,7 @@ int Main(int argc, char** argv) {
   }
   std::printf("\n%-22s %-22s %5s %3s %8s %5s %7s %8s %8s %7s %7s %7s %7s %7s\n", "trained on",
               "evaluated on", "k", "L", "sample", "iters", "words", "train_s", "quant_ms",
-              "sim_ms", "P5_L1", "P5_L2", "loop_L1", "loop_L2");
+              "sim_ms", "P5_L1", "P5_L2", "R1_L1", "R1_L2");
   for (const Sequence& train_on : sequences) {
     for (const auto& [k, depth] : configs) {
       for (const int sample : samples) {

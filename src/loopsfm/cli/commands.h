@@ -15,6 +15,7 @@ void AddTracksCommand(CLI::App& app);
 void AddSynthCommand(CLI::App& app);
 void AddReconstructCommand(CLI::App& app);
 void AddEvalCommand(CLI::App& app);
+void AddVocabCommand(CLI::App& app);
 
 
 }  // namespace loopsfm::cli

@@ -1,6 +1,7 @@
 #include "loopsfm/cli/commands.h"
 #include "loopsfm/cli/stage_flags.h"
 #include "loopsfm/util/logging.h"
+#include "loopsfm/video/frame_source.h"
 
 namespace loopsfm::cli {
 
@@ -19,6 +20,8 @@ void AddExtractCommand(CLI::App& app) {
   AddExtractFlags(cmd, &flags->extract);
   cmd->callback([flags] {
     const ExtractOptions options = flags->extract.Resolve();
+    // Refuse a bad input before the database file is created.
+    OpenFrameSource(flags->input);
     Database database = Database::Open(flags->database);
     const ExtractReport report = ExtractFeatures(flags->input, database, options);
     spdlog::info(

@@ -28,6 +28,7 @@ int main(int argc, char** argv) {
   cli::AddMatchCommand(app);
   cli::AddTracksCommand(app);
   cli::AddSynthCommand(app);
+  cli::AddVocabCommand(app);
 
   try {
     app.parse(argc, argv);

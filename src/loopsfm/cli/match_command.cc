@@ -1,8 +1,11 @@
+#include <fstream>
+
 #include <fmt/format.h>
 
 #include "loopsfm/cli/commands.h"
 #include "loopsfm/cli/stage_flags.h"
 #include "loopsfm/pipeline/match.h"
+#include "loopsfm/util/errors.h"
 #include "loopsfm/util/logging.h"
 
 namespace loopsfm::cli {
@@ -23,6 +26,7 @@ void LogTrackReport(const TrackBuildReport& report) {
 void AddMatchCommand(CLI::App& app) {
   struct Flags {
     std::string database;
+    std::string json_report;
     MatchFlags match;
   };
   auto flags = std::make_shared<Flags>();
@@ -31,6 +35,8 @@ void AddMatchCommand(CLI::App& app) {
   cmd->add_option("-d,--database", flags->database, "Database written by `loopsfm extract`")
       ->required();
   AddMatchFlags(cmd, &flags->match);
+  cmd->add_option("--json-report", flags->json_report,
+                  "Also write the stage report (pairs tried and verified, timings) as JSON");
   cmd->callback([flags] {
     const MatchOptions options = flags->match.Resolve();
     Database database = OpenExistingDatabase(flags->database);
@@ -41,6 +47,11 @@ void AddMatchCommand(CLI::App& app) {
         PairStrategyName(options.strategy), report.num_pairs, report.num_pairs_resumed,
         report.num_pairs_matched, report.num_pairs_verified, report.MeanInliers(),
         report.median_match_ms, report.median_verify_ms, report.seconds);
+    if (!flags->json_report.empty()) {
+      std::ofstream out(flags->json_report);
+      out << ToJson(report).dump(2) << "\n";
+      if (!out) throw StorageError(fmt::format("cannot write '{}'", flags->json_report));
+    }
     TrackBuildReport tracks;
     BuildTracksFromDatabase(database, {}, &tracks);
     LogTrackReport(tracks);

@@ -1,5 +1,7 @@
 #include "loopsfm/cli/stage_flags.h"
 
+#include <algorithm>
+
 #include "loopsfm/cli/common.h"
 #include "loopsfm/scene/dataset_files.h"
 
@@ -35,7 +37,8 @@ ExtractOptions ExtractFlags::Resolve() const {
 void AddMatchFlags(CLI::App* cmd, MatchFlags* flags) {
   cmd->add_option("--pairs", flags->pairs,
                   "Pairing strategy: exhaustive | sequential (default) | vocabtree (sequential "
-                  "neighbours plus vocabulary-tree loop detection)");
+                  "neighbours plus vocabulary-tree loop detection) | lowres (exhaustive with a "
+                  "low-resolution prefilter)");
   cmd->add_option("--vocab", flags->vocab, "Vocabulary tree file from `loopsfm vocab build` "
                   "(default: train one on the scene's own descriptors)");
   cmd->add_option("--vocab-branching", flags->options.vocab_tree.branching,
@@ -67,6 +70,9 @@ MatchOptions MatchFlags::Resolve() const {
   MatchOptions resolved = options;
   resolved.strategy = ParsePairStrategy(pairs.empty() ? "sequential" : pairs);
   if (mutual) resolved.matcher.cross_check = true;
+  // The wider window of the first frames is never narrower than the requested overlap.
+  resolved.sequential.initial_overlap =
+      std::max(resolved.sequential.initial_overlap, resolved.sequential.overlap);
   if (!vocab.empty()) resolved.vocab_path = vocab;
   resolved.num_threads = Common().threads;
   resolved.show_progress = !Common().quiet;

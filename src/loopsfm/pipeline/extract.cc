@@ -67,7 +67,6 @@ class CameraRegistry {
     return id;
   }
 
-  int NumCameras() const { return static_cast<int>(by_size_.size()); }
 
  private:
   Database& database_;
@@ -158,7 +157,7 @@ ExtractReport ExtractFeatures(const std::filesystem::path& input, Database& data
   cv::setNumThreads(previous_cv_threads);
   progress.Finish();
   report.unreadable_images = source->NumSkipped();
-  report.num_cameras = cameras.NumCameras();
+  report.num_cameras = static_cast<int>(database.NumCameras());
   report.seconds = timer.ElapsedSeconds();
   return report;
 }

@@ -17,8 +17,9 @@ PairStrategy ParsePairStrategy(const std::string& name) {
   if (name == "exhaustive") return PairStrategy::kExhaustive;
   if (name == "sequential") return PairStrategy::kSequential;
   if (name == "vocabtree") return PairStrategy::kVocabTree;
+  if (name == "lowres") return PairStrategy::kLowRes;
   throw InvalidArgument(fmt::format(
-      "unknown pairing strategy '{}'; choose exhaustive, sequential or vocabtree", name));
+      "unknown pairing strategy '{}'; choose exhaustive, sequential, vocabtree or lowres", name));
 }
 
 std::string PairStrategyName(PairStrategy strategy) {
@@ -26,6 +27,7 @@ std::string PairStrategyName(PairStrategy strategy) {
     case PairStrategy::kExhaustive: return "exhaustive";
     case PairStrategy::kSequential: return "sequential";
     case PairStrategy::kVocabTree: return "vocabtree";
+    case PairStrategy::kLowRes: return "lowres";
   }
   return "?";
 }
@@ -37,6 +39,10 @@ void MatchOptions::Check() const {
   LOOPSFM_REQUIRE_OPTION(num_threads >= 0, "--threads must be 0 (all cores) or positive, got {}",
                          num_threads);
   LOOPSFM_REQUIRE_OPTION(batch_size > 0, "batch size must be positive, got {}", batch_size);
+  LOOPSFM_REQUIRE_OPTION(lowres_num_features >= 16, "lowres features must be at least 16, got {}",
+                         lowres_num_features);
+  LOOPSFM_REQUIRE_OPTION(lowres_min_matches >= 1, "lowres minimum matches must be positive, got {}",
+                         lowres_min_matches);
   vocab_tree.Check();
   guided.Check();
 }
@@ -171,9 +177,39 @@ MatchReport MatchPairs(Database& database, const MatchOptions& options) {
     case PairStrategy::kVocabTree:
       MatchVocabTreeGuided(database, ordered_ids, options, matcher, &report);
       break;
+    case PairStrategy::kLowRes:
+      MatchLowResPrefiltered(database, ordered_ids, options, matcher, &report);
+      break;
   }
   report.seconds = timer.ElapsedSeconds();
   return report;
+}
+
+nlohmann::json ToJson(const MatchReport& r) {
+  nlohmann::json rounds = nlohmann::json::array();
+  for (const auto& round : r.vocab.guided.rounds) {
+    rounds.push_back({{"from_scores", round.num_from_scores},
+                      {"from_growing", round.num_from_growing},
+                      {"verified", round.num_verified}});
+  }
+  return {{"num_pairs", r.num_pairs},
+          {"num_pairs_resumed", r.num_pairs_resumed},
+          {"num_pairs_matched", r.num_pairs_matched},
+          {"num_pairs_verified", r.num_pairs_verified},
+          {"num_raw_matches", r.num_raw_matches},
+          {"num_inliers", r.num_inliers},
+          {"seconds", r.seconds},
+          {"load_seconds", r.load_seconds},
+          {"median_match_ms", r.median_match_ms},
+          {"median_verify_ms", r.median_verify_ms},
+          {"lowres_prefilter_seconds", r.lowres_prefilter_seconds},
+          {"lowres_num_passed", r.lowres_num_passed},
+          {"vocab",
+           {{"build_seconds", r.vocab.build_seconds},
+            {"score_seconds", r.vocab.score_seconds},
+            {"propose_seconds", r.vocab.propose_seconds},
+            {"match_seconds", r.vocab.match_seconds},
+            {"rounds", rounds}}}};
 }
 
 std::vector<Track> BuildTracksFromDatabase(const Database& database,

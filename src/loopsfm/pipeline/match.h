@@ -11,6 +11,8 @@
 #include <map>
 #include <unordered_map>
 
+#include <nlohmann/json.hpp>
+
 #include "loopsfm/matching/descriptor_matcher.h"
 #include "loopsfm/matching/guided_pairing.h"
 #include "loopsfm/retrieval/vocabulary_tree.h"
@@ -22,10 +24,13 @@
 namespace loopsfm {
 
 // exhaustive: every pair; sequential: each frame with its K previous ones; vocabtree:
-// sequential neighbours, then vocabulary-tree guided rounds with region growing (loops).
-enum class PairStrategy { kExhaustive, kSequential, kVocabTree };
+// sequential neighbours, then vocabulary-tree guided rounds with region growing (loops);
+// lowres: every pair, but first matched on the largest-scale features only, and fully
+// matched only when that gives enough matches.
+enum class PairStrategy { kExhaustive, kSequential, kVocabTree, kLowRes };
 
-// Parses "exhaustive" | "sequential" | "vocabtree"; throws InvalidArgument naming the choices.
+// Parses "exhaustive" | "sequential" | "vocabtree" | "lowres"; throws InvalidArgument
+// naming the choices.
 PairStrategy ParsePairStrategy(const std::string& name);
 std::string PairStrategyName(PairStrategy strategy);
 
@@ -46,6 +51,10 @@ struct MatchOptions {
   GuidedPairingOptions guided;
   // Vocabtree: match sequential neighbours first (video frames are ordered).
   bool vocab_include_sequential = true;
+  // Lowres: features per frame in the prefilter (largest scale first) and the matches
+  // the prefilter must find for the pair to be fully matched.
+  int lowres_num_features = 300;
+  int lowres_min_matches = 12;
   // Vocabtree: write the similarity and match matrices as PNG next to the database.
   bool write_matrix_images = true;
   // Worker threads (0: all cores).
@@ -82,6 +91,9 @@ struct MatchReport {
   double median_verify_ms = 0.0;
   // Filled by the vocabtree strategy.
   VocabTreeTimings vocab;
+  // Filled by the lowres strategy: prefilter time and pairs it let through.
+  double lowres_prefilter_seconds = 0.0;
+  size_t lowres_num_passed = 0;
   double MeanInliers() const {
     return num_pairs_verified ? double(num_inliers) / num_pairs_verified : 0.0;
   }
@@ -106,6 +118,14 @@ class PairMatcher {
   std::map<image_t, FeatureSet> cache_;
   std::vector<double> match_ms_, verify_ms_;
 };
+
+// The lowres strategy over all pairs; pairs the prefilter rejects are recorded as tried
+// with no matches (an empty matches row), so a resumed run skips them.
+void MatchLowResPrefiltered(Database& database, const std::vector<image_t>& ordered_ids,
+                            const MatchOptions& options, PairMatcher& matcher, MatchReport* report);
+
+// The report as JSON (for benchmarks and scripts).
+nlohmann::json ToJson(const MatchReport& report);
 
 // The vocabtree strategy: sequential neighbours, then guided rounds (see guided_pairing.h).
 void MatchVocabTreeGuided(Database& database, const std::vector<image_t>& ordered_ids,

@@ -114,6 +114,8 @@ ReconstructReport Reconstruct(const fs::path& input, const fs::path& output_dir,
   options.Check();
   Timer total;
   ReconstructReport report;
+  // Refuse a bad input before anything is created.
+  OpenFrameSource(input);
   std::error_code ec;
   fs::create_directories(output_dir, ec);
   if (ec || !fs::is_directory(output_dir)) {

@@ -14,6 +14,66 @@ namespace {
 
 constexpr uint32_t kNoIndex = std::numeric_limits<uint32_t>::max();
 
+// SimilarityMatrix() scores the words that are in many images with a dense product: a word in
+// at least this fraction of the images (and at least kMinDensePostings), most frequent first,
+// while the dense matrix stays under kMaxDenseBytes. A sparse list costs about n_w^2 / 2
+// scattered additions, a dense column n^2 / 2 vectorised ones; the fractions are where the two
+// cost the same in bench_retrieval.
+constexpr double kDenseFractionL2 = 1.0 / 8;   // GEMM
+constexpr double kDenseFractionL1 = 1.0 / 4;   // vectorised min-sum
+constexpr size_t kMinDensePostings = 64;
+constexpr size_t kMaxDenseBytes = size_t{512} << 20;
+// Rows per task of the dense product (fixed, so results do not depend on the thread count).
+constexpr int64_t kDenseRowBlock = 64;
+// QueryAll ranks the columns of SimilarityMatrix() up to this many images.
+constexpr int kMaxImagesForMatrixQueryAll = 8192;
+
+using RowMajorMatrixXf = Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
+
+// similarity(i, j) = sum_k min(dense(i, k), dense(j, k)) for j <= i, i in [begin, end): rows i
+// go kTile at a time against each row j (read once per tile), 16 words per vector register.
+void MinSumLowerRows(const RowMajorMatrixXf& dense, int64_t begin, int64_t end,
+                     Eigen::MatrixXf& similarity) {
+  using Lanes = Eigen::Array<float, 16, 1>;
+  constexpr int kTile = 8;
+  const int64_t m = dense.cols();  // a multiple of 16
+  for (int64_t i0 = begin; i0 < end; i0 += kTile) {
+    const int tile = static_cast<int>(std::min<int64_t>(kTile, end - i0));
+    const float* rows[kTile];
+    for (int t = 0; t < kTile; ++t) rows[t] = dense.row(i0 + std::min(t, tile - 1)).data();
+    for (int64_t j = 0; j < i0 + tile; ++j) {
+      const float* other = dense.row(j).data();
+      Lanes sums[kTile];
+      for (Lanes& sum : sums) sum.setZero();
+      for (int64_t k = 0; k < m; k += 16) {
+        const Lanes b = Eigen::Map<const Lanes>(other + k);
+        for (int t = 0; t < kTile; ++t) sums[t] += Eigen::Map<const Lanes>(rows[t] + k).min(b);
+      }
+      for (int t = 0; t < tile; ++t) {
+        if (j <= i0 + t) similarity(i0 + t, j) = sums[t].sum();
+      }
+    }
+  }
+}
+
+// similarity(i, j) for j <= i = sum_k f(dense(i, k), dense(j, k)): f = product (one GEMM per
+// block of rows) or min. Blocks of rows are independent tasks.
+void DenseLowerTriangle(const RowMajorMatrixXf& dense, TfIdfNorm norm,
+                        Eigen::MatrixXf& similarity) {
+  const int64_t n = dense.rows();
+  const int64_t num_blocks = (n + kDenseRowBlock - 1) / kDenseRowBlock;
+  tbb::parallel_for(int64_t{0}, num_blocks, [&](int64_t block) {
+    const int64_t begin = block * kDenseRowBlock;
+    const int64_t rows = std::min(kDenseRowBlock, n - begin);
+    if (norm == TfIdfNorm::kL2) {
+      similarity.block(begin, 0, rows, begin + rows).noalias() =
+          dense.middleRows(begin, rows) * dense.topRows(begin + rows).transpose();
+      return;
+    }
+    MinSumLowerRows(dense, begin, begin + rows, similarity);
+  });
+}
+
 // Sorted distinct words with their counts.
 void CountWords(std::vector<uint32_t> words, int num_words, std::vector<uint32_t>& distinct,
                 std::vector<float>& counts) {
@@ -126,17 +186,20 @@ void ImageDatabase::Finalize() {
   image_values_.shrink_to_fit();
 
   // Inverted file by counting sort; images go in in index order, so each list is sorted.
+  LOOPSFM_CHECK_LT(out, size_t{kNoIndex});
   word_begin_.assign(num_words_ + 1, 0);
   for (const uint32_t word : image_words_) ++word_begin_[word + 1];
   for (int w = 0; w < num_words_; ++w) word_begin_[w + 1] += word_begin_[w];
   posting_images_.resize(out);
   posting_weights_.resize(out);
+  image_posting_.resize(out);
   std::vector<size_t> next(word_begin_.begin(), word_begin_.end() - 1);
   for (size_t i = 0; i < n; ++i) {
     for (size_t k = image_begin_[i]; k < image_begin_[i + 1]; ++k) {
       const size_t slot = next[image_words_[k]]++;
       posting_images_[slot] = static_cast<uint32_t>(i);
       posting_weights_[slot] = image_values_[k];
+      image_posting_[k] = static_cast<uint32_t>(slot);
     }
   }
   finalized_ = true;
@@ -170,18 +233,13 @@ std::vector<std::pair<uint32_t, float>> ImageDatabase::ImageVector(image_t image
   return out;
 }
 
-void ImageDatabase::Score(const SparseVector& query, uint32_t first_index, float* scores) const {
+void ImageDatabase::Score(const SparseVector& query, float* scores) const {
   auto accumulate = [&]<TfIdfNorm kNorm>() {
     for (size_t i = 0; i < query.size; ++i) {
       const float q = query.weights[i];
-      const uint32_t* images = posting_images_.data();
-      size_t begin = word_begin_[query.words[i]];
       const size_t end = word_begin_[query.words[i] + 1];
-      if (first_index > 0) {
-        begin = std::lower_bound(images + begin, images + end, first_index) - images;
-      }
-      for (size_t k = begin; k < end; ++k) {
-        scores[images[k]] += Term<kNorm>(q, posting_weights_[k]);
+      for (size_t k = word_begin_[query.words[i]]; k < end; ++k) {
+        scores[posting_images_[k]] += Term<kNorm>(q, posting_weights_[k]);
       }
     }
   };
@@ -192,10 +250,10 @@ void ImageDatabase::Score(const SparseVector& query, uint32_t first_index, float
   }
 }
 
-std::vector<ImageScore> ImageDatabase::Rank(const std::vector<float>& scores, uint32_t exclude,
+std::vector<ImageScore> ImageDatabase::Rank(const float* scores, uint32_t exclude,
                                             int max_results) const {
   std::vector<uint32_t> candidates;
-  for (uint32_t i = 0; i < scores.size(); ++i) {
+  for (uint32_t i = 0; i < image_ids_.size(); ++i) {
     if (scores[i] > 0 && i != exclude) candidates.push_back(i);
   }
   const auto better = [&](uint32_t a, uint32_t b) {
@@ -213,8 +271,8 @@ std::vector<ImageScore> ImageDatabase::Query(image_t image_id, int max_results) 
   LOOPSFM_CHECK_MSG(finalized_, "ImageDatabase::Query before Finalize");
   const uint32_t index = IndexOf(image_id);
   std::vector<float> scores(image_ids_.size(), 0.0f);
-  Score(ImageVectorAt(index), 0, scores.data());
-  return Rank(scores, index, max_results);
+  Score(ImageVectorAt(index), scores.data());
+  return Rank(scores.data(), index, max_results);
 }
 
 std::vector<ImageScore> ImageDatabase::Query(const std::vector<uint32_t>& words,
@@ -225,17 +283,26 @@ std::vector<ImageScore> ImageDatabase::Query(const std::vector<uint32_t>& words,
   CountWords(words, num_words_, distinct, values);
   const size_t size = WeightAndNormalise(distinct, values, 0, distinct.size(), idf_, options_.norm);
   std::vector<float> scores(image_ids_.size(), 0.0f);
-  Score({distinct.data(), values.data(), size}, 0, scores.data());
-  return Rank(scores, kNoIndex, max_results);
+  Score({distinct.data(), values.data(), size}, scores.data());
+  return Rank(scores.data(), kNoIndex, max_results);
 }
 
 std::vector<std::vector<ImageScore>> ImageDatabase::QueryAll(int max_results) const {
   LOOPSFM_CHECK_MSG(finalized_, "ImageDatabase::QueryAll before Finalize");
-  std::vector<std::vector<ImageScore>> results(image_ids_.size());
-  tbb::parallel_for(size_t{0}, image_ids_.size(), [&](size_t i) {
-    std::vector<float> scores(image_ids_.size(), 0.0f);
-    Score(ImageVectorAt(static_cast<uint32_t>(i)), 0, scores.data());
-    results[i] = Rank(scores, static_cast<uint32_t>(i), max_results);
+  const size_t n = image_ids_.size();
+  std::vector<std::vector<ImageScore>> results(n);
+  if (n <= kMaxImagesForMatrixQueryAll) {
+    const Eigen::MatrixXf similarity = SimilarityMatrix();
+    tbb::parallel_for(size_t{0}, n, [&](size_t i) {
+      results[i] = Rank(similarity.col(static_cast<int64_t>(i)).data(), static_cast<uint32_t>(i),
+                        max_results);
+    });
+    return results;
+  }
+  tbb::parallel_for(size_t{0}, n, [&](size_t i) {
+    std::vector<float> scores(n, 0.0f);
+    Score(ImageVectorAt(static_cast<uint32_t>(i)), scores.data());
+    results[i] = Rank(scores.data(), static_cast<uint32_t>(i), max_results);
   });
   return results;
 }
@@ -244,19 +311,73 @@ Eigen::MatrixXf ImageDatabase::SimilarityMatrix() const {
   LOOPSFM_CHECK_MSG(finalized_, "ImageDatabase::SimilarityMatrix before Finalize");
   const int64_t n = NumImages();
   Eigen::MatrixXf similarity = Eigen::MatrixXf::Zero(n, n);
-  // Column j gets the scores with the images after j (each shared word once per pair), then the
-  // upper triangle is mirrored. Columns are independent, so any thread count gives the same.
+  if (n == 0) return similarity;
+
+  // Words in many images: a dense n x m matrix (m padded to whole cache lines, so that every
+  // row starts aligned), scored by a dense product into the lower triangle.
+  const double fraction =
+      options_.norm == TfIdfNorm::kL2 ? kDenseFractionL2 : kDenseFractionL1;
+  const double min_dense = std::max<double>(kMinDensePostings, (getenv("TUNE_FRAC") ? atof(getenv("TUNE_FRAC")) : fraction) * n);  // TUNING
+  std::vector<uint32_t> frequent;
+  for (int w = 0; w < num_words_; ++w) {
+    if (word_begin_[w + 1] - word_begin_[w] >= min_dense) frequent.push_back(w);
+  }
+  std::stable_sort(frequent.begin(), frequent.end(), [&](uint32_t a, uint32_t b) {
+    return word_begin_[a + 1] - word_begin_[a] > word_begin_[b + 1] - word_begin_[b];
+  });
+  frequent.resize(std::min(frequent.size(), kMaxDenseBytes / (sizeof(float) * n)));
+  std::vector<uint8_t> is_frequent(num_words_, 0);
+  if (!frequent.empty()) {
+    const int64_t m = (static_cast<int64_t>(frequent.size()) + 15) / 16 * 16;  // zero padding
+    RowMajorMatrixXf dense = RowMajorMatrixXf::Zero(n, m);
+    for (size_t c = 0; c < frequent.size(); ++c) {
+      const uint32_t w = frequent[c];
+      is_frequent[w] = 1;
+      for (size_t k = word_begin_[w]; k < word_begin_[w + 1]; ++k) {
+        dense(posting_images_[k], static_cast<int64_t>(c)) = posting_weights_[k];
+      }
+    }
+    DenseLowerTriangle(dense, options_.norm, similarity);
+  }
+
+  // The other words through the inverted file: column j gets, for each of its words, the
+  // images after j in the word's list (each pair once). Columns are independent tasks.
+  auto sparse_column = [&]<TfIdfNorm kNorm>(int64_t j) {
+    float* column = similarity.col(j).data();
+    const size_t end_k = image_begin_[j + 1];
+    for (size_t k = image_begin_[j]; k < end_k; ++k) {
+      const uint32_t w = image_words_[k];
+      if (is_frequent[w]) continue;
+      if (k + 4 < end_k) {
+        __builtin_prefetch(posting_images_.data() + image_posting_[k + 4]);
+        __builtin_prefetch(posting_weights_.data() + image_posting_[k + 4]);
+      }
+      const float q = image_values_[k];
+      const size_t end = word_begin_[w + 1];
+      for (size_t p = image_posting_[k] + 1; p < end; ++p) {
+        column[posting_images_[p]] += Term<kNorm>(q, posting_weights_[p]);
+      }
+    }
+  };
   tbb::parallel_for(tbb::blocked_range<int64_t>(0, n, 1), [&](const auto& range) {
     for (int64_t j = range.begin(); j < range.end(); ++j) {
-      const SparseVector v = ImageVectorAt(static_cast<uint32_t>(j));
-      Score(v, static_cast<uint32_t>(j + 1), similarity.col(j).data());
-      float self = 0;
-      for (size_t i = 0; i < v.size; ++i) {
-        self += options_.norm == TfIdfNorm::kL2 ? v.weights[i] * v.weights[i] : v.weights[i];
+      if (options_.norm == TfIdfNorm::kL2) {
+        sparse_column.template operator()<TfIdfNorm::kL2>(j);
+      } else {
+        sparse_column.template operator()<TfIdfNorm::kL1>(j);
       }
-      similarity(j, j) = self;
     }
   });
+
+  // Self-scores on the diagonal, then the lower triangle mirrored.
+  for (int64_t j = 0; j < n; ++j) {
+    const SparseVector v = ImageVectorAt(static_cast<uint32_t>(j));
+    float self = 0;
+    for (size_t i = 0; i < v.size; ++i) {
+      self += options_.norm == TfIdfNorm::kL2 ? v.weights[i] * v.weights[i] : v.weights[i];
+    }
+    similarity(j, j) = self;
+  }
   for (int64_t j = 0; j < n; ++j) {
     for (int64_t i = j + 1; i < n; ++i) similarity(j, i) = similarity(i, j);
   }

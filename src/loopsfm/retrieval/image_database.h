@@ -77,12 +77,16 @@ class ImageDatabase {
   // The same for an image outside the database, given by its words; words in no indexed image
   // carry no weight.
   std::vector<ImageScore> Query(const std::vector<uint32_t>& words, int max_results) const;
-  // Query(id, max_results) for every image, in the order of ImageIds(), in parallel.
+  // Query(id, max_results) for every image, in the order of ImageIds(), in parallel. Up to
+  // 8192 images it ranks the columns of SimilarityMatrix(), whose scores may differ from
+  // Query's in the last bits (and so order near-ties differently).
   std::vector<std::vector<ImageScore>> QueryAll(int max_results) const;
-  // n x n symmetric scores in the order of ImageIds(), computed through the inverted file;
-  // the diagonal holds each image's score with itself (1 up to rounding; 0 for an image
-  // without weighted words). Entries equal the scores Query returns. Memory is 4 n^2 bytes:
-  // prefer QueryAll for many thousands of images.
+  // n x n symmetric scores in the order of ImageIds(); the diagonal holds each image's score
+  // with itself (1 up to rounding; 0 for an image without weighted words). Words in many
+  // images go through a dense product (a GEMM for kL2), the others through the inverted file,
+  // each pair once. Entries equal Query's scores up to float rounding (relative 1e-6); the
+  // result does not depend on the thread count. Memory is 4 n^2 bytes, plus up to 512 MiB
+  // for the dense part: for many thousands of images prefer Query per image.
   Eigen::MatrixXf SimilarityMatrix() const;
 
  private:
@@ -93,11 +97,10 @@ class ImageDatabase {
   };
   SparseVector ImageVectorAt(uint32_t index) const;
   uint32_t IndexOf(image_t image_id) const;
-  // Scores of every indexed image against `query` into scores[0 .. n), only for images with
-  // index >= first_index.
-  void Score(const SparseVector& query, uint32_t first_index, float* scores) const;
-  std::vector<ImageScore> Rank(const std::vector<float>& scores, uint32_t exclude,
-                               int max_results) const;
+  // Adds the scores of every indexed image against `query` to scores[0 .. n).
+  void Score(const SparseVector& query, float* scores) const;
+  // The best max_results of scores[0 .. n) as in Query, leaving out index `exclude`.
+  std::vector<ImageScore> Rank(const float* scores, uint32_t exclude, int max_results) const;
 
   int num_words_;
   ImageDatabaseOptions options_;
@@ -110,11 +113,13 @@ class ImageDatabase {
   std::vector<uint32_t> image_words_;
   std::vector<float> image_values_;
   // After Finalize(): IDF per word, and the inverted file: per word, (image index, weight)
-  // sorted by image index in word_begin_[w] .. word_begin_[w + 1].
+  // sorted by image index in word_begin_[w] .. word_begin_[w + 1]; image_posting_[k] is where
+  // entry k of image_words_ sits in its word's list.
   std::vector<float> idf_;
   std::vector<size_t> word_begin_;
   std::vector<uint32_t> posting_images_;
   std::vector<float> posting_weights_;
+  std::vector<uint32_t> image_posting_;
 };
 
 // Quantises every image's descriptors with the tree (images in parallel) and returns the

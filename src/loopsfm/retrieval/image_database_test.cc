@@ -137,7 +137,8 @@ TEST_P(ImageDatabaseNormTest, RetrievesNeighboursOnAPath) {
     for (const ImageScore& s : ranked) EXPECT_NE(s.image_id, images.ids[i]);
   }
 
-  // The matrix is symmetric, has the self-scores on its diagonal and equals the query scores.
+  // The matrix is symmetric, has the self-scores on its diagonal and equals the query scores
+  // up to rounding.
   const Eigen::MatrixXf similarity = database.SimilarityMatrix();
   ASSERT_EQ(similarity.rows(), 40);
   EXPECT_TRUE((similarity.array() == similarity.transpose().array()).all());
@@ -146,10 +147,14 @@ TEST_P(ImageDatabaseNormTest, RetrievesNeighboursOnAPath) {
   EXPECT_GE(similarity.minCoeff(), 0.0f);
   const auto all = database.QueryAll(0);
   for (int i = 0; i < 40; ++i) {
-    EXPECT_EQ(all[i], database.Query(images.ids[i], 0));
-    for (const ImageScore& s : all[i]) {
+    const auto ranked = database.Query(images.ids[i], 0);
+    ASSERT_EQ(all[i].size(), ranked.size());
+    for (const ImageScore& s : ranked) {
       const int j = (s.image_id - 100) / 2;
-      EXPECT_EQ(s.score, similarity(i, j)) << i << " " << j;
+      EXPECT_NEAR(s.score, similarity(i, j), 1e-6f) << i << " " << j;
+    }
+    for (const ImageScore& s : all[i]) {
+      EXPECT_EQ(s.score, similarity(i, (s.image_id - 100) / 2));
     }
   }
   {
@@ -162,6 +167,53 @@ TEST_P(ImageDatabaseNormTest, RetrievesNeighboursOnAPath) {
   ASSERT_FALSE(outside.empty());
   EXPECT_EQ(outside[0].image_id, images.ids[17]);
   EXPECT_NEAR(outside[0].score, 1.0f, 1e-5f);
+}
+
+TEST_P(ImageDatabaseNormTest, SimilarityMatrixMatchesBruteForce) {
+  // 150 images over 400 words with P(word w) ~ 1 / (w + 3): the frequent words are in most
+  // images (the dense product), the rare ones in a few (the inverted file).
+  Random random(13);
+  std::vector<double> cdf;
+  double total = 0;
+  for (int w = 0; w < 400; ++w) cdf.push_back(total += 1.0 / (w + 3));
+  ImageDatabase database(400, WithNorm(GetParam()));
+  for (image_t i = 0; i < 150; ++i) {
+    std::vector<uint32_t> words(random.UniformInt(0, 60));
+    for (auto& w : words) {
+      w = std::lower_bound(cdf.begin(), cdf.end(), random.UniformReal(0, total)) - cdf.begin();
+    }
+    database.AddImage(i, words);
+  }
+  database.Finalize();
+  const Eigen::MatrixXf similarity = database.SimilarityMatrix();
+  int dense_words = 0;
+  for (uint32_t w = 0; w < 400; ++w) {
+    dense_words += database.IdfWeight(w) > 0 && database.IdfWeight(w) < std::log(150.0 / 64);
+  }
+  EXPECT_GT(dense_words, 3);
+  for (image_t i = 0; i < 150; ++i) {
+    const auto a = database.ImageVector(i);
+    for (image_t j = 0; j < 150; ++j) {
+      const auto b = database.ImageVector(j);
+      double expected = 0;
+      for (size_t p = 0, q = 0; p < a.size() && q < b.size();) {
+        if (a[p].first < b[q].first) {
+          ++p;
+        } else if (b[q].first < a[p].first) {
+          ++q;
+        } else {
+          expected += GetParam() == TfIdfNorm::kL2 ? double{a[p].second} * b[q].second
+                                                   : std::min(a[p].second, b[q].second);
+          ++p, ++q;
+        }
+      }
+      ASSERT_NEAR(similarity(i, j), expected, 1e-5) << i << " " << j;
+    }
+  }
+  {
+    tbb::global_control one_thread(tbb::global_control::max_allowed_parallelism, 1);
+    EXPECT_TRUE((database.SimilarityMatrix().array() == similarity.array()).all());
+  }
 }
 
 INSTANTIATE_TEST_SUITE_P(Norms, ImageDatabaseNormTest,

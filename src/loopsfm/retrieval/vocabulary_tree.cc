@@ -89,14 +89,13 @@ VocabularyTree VocabularyTree::Train(const std::vector<const FeatureDescriptors*
                options, random);
 }
 
-VocabularyTree VocabularyTree::Train(const FeatureDescriptors& descriptors,
-                                     const VocabTreeOptions& options, Random& random) {
+VocabularyTree VocabularyTree::Train(FeatureDescriptors data, const VocabTreeOptions& options,
+                                     Random& random) {
   options.Check();
-  if (descriptors.rows() == 0) {
+  if (data.rows() == 0) {
     throw InvalidArgument("cannot train a vocabulary tree without descriptors");
   }
-  // Reordered level by level so that the descriptors of every node are contiguous rows.
-  FeatureDescriptors data = descriptors;
+  // `data` is reordered level by level so that the descriptors of every node are contiguous.
   // Each node draws from its own generator, derived from its (breadth-first) id, so that nodes
   // can be split in any order.
   const Random base(random.Engine()());
@@ -181,7 +180,7 @@ uint32_t VocabularyTree::Quantize(const uint8_t* descriptor) const {
   while (nodes_[index].num_children > 0) {
     const Node& node = nodes_[index];
     index = node.first_child +
-            internal::NearestCentre(x, centres_.data() + int64_t{node.first_child} * kDescriptorDim,
+            internal::NearestCentre(x, centres_.row(node.first_child).data(),
                                     squared_norms_.data() + node.first_child,
                                     static_cast<int>(node.num_children));
   }

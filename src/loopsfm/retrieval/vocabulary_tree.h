@@ -44,12 +44,13 @@ class VocabularyTree {
   // An empty tree (NumWords() == 0); Train or Load to get a usable one.
   VocabularyTree() = default;
 
-  // Hierarchical k-means over `descriptors` (all of them: sample first for large sets).
+  // Hierarchical k-means over `descriptors` (all of them, ignoring max_training_descriptors:
+  // sample first for large sets; taken by value and reordered in place, so move a sample in).
   // Nodes with fewer than `branching` descriptors, or whose descriptors are all equal, become
   // leaves early. Deterministic for a given state of `random`, whatever the thread count;
   // advances `random`. Throws InvalidArgument for bad options or no descriptors.
-  static VocabularyTree Train(const FeatureDescriptors& descriptors,
-                              const VocabTreeOptions& options, Random& random);
+  static VocabularyTree Train(FeatureDescriptors descriptors, const VocabTreeOptions& options,
+                              Random& random);
   // Samples options.max_training_descriptors from the sets (SampleDescriptors), then trains.
   static VocabularyTree Train(const std::vector<const FeatureDescriptors*>& descriptor_sets,
                               const VocabTreeOptions& options, Random& random);
@@ -95,9 +96,9 @@ class VocabularyTree {
   int num_words_ = 0;
   std::vector<Node> nodes_;             // breadth-first; node 0 is the root
   DescriptorCentres centres_;           // one row per node (the root's is unused)
-  Eigen::VectorXf squared_norms_;       // |centre|^2 per node
   std::vector<uint32_t> node_word_;     // word of a leaf, kNoWord for inner nodes
   std::vector<uint32_t> word_node_;     // node of each word
+  Eigen::VectorXf squared_norms_;       // |centre|^2 per node
 };
 
 }  // namespace loopsfm

@@ -196,14 +196,12 @@ TEST(VocabularyTree, TrainsOnASampleOfTheInputSets) {
 
   const FeatureDescriptors sample = SampleDescriptors(sets, 100, sample_random);
   ASSERT_EQ(sample.rows(), 100);
-  std::set<std::vector<uint8_t>> input_rows, sample_rows;
-  for (int i = 0; i < 800; ++i) {
-    input_rows.insert(std::vector<uint8_t>(all.row(i).data(), all.row(i).data() + kDescriptorDim));
-  }
-  for (int i = 0; i < 100; ++i) {
-    sample_rows.insert(
-        std::vector<uint8_t>(sample.row(i).data(), sample.row(i).data() + kDescriptorDim));
-  }
+  auto row_bytes = [](const FeatureDescriptors& d, int i) {
+    return std::string(reinterpret_cast<const char*>(d.row(i).data()), kDescriptorDim);
+  };
+  std::set<std::string> input_rows, sample_rows;
+  for (int i = 0; i < 800; ++i) input_rows.insert(row_bytes(all, i));
+  for (int i = 0; i < 100; ++i) sample_rows.insert(row_bytes(sample, i));
   EXPECT_EQ(sample_rows.size(), 100u);  // distinct rows picked
   for (const auto& row : sample_rows) EXPECT_TRUE(input_rows.count(row));
 
