@@ -243,9 +243,9 @@ TEST_F(CliSyntheticTest, DatabaseNamesVideoFramesByIndex) {
 }
 
 // Sequential pairing with a small overlap never pairs the first and the last frame of the
-// loop, although they see the same part of the cylinder: finding that pair is left to loop
-// detection. Exhaustive matching on the same database shows that the pair does verify.
-TEST_F(CliSyntheticTest, SequentialPairsLeaveTheLoopOpen) {
+// loop, although they see the same part of the cylinder; vocabulary-tree guided matching
+// on the same database verifies that pair without trying every pair.
+TEST_F(CliSyntheticTest, SequentialPairsLeaveTheLoopOpenVocabTreeClosesIt) {
   TempDir tmp;
   const fs::path db = tmp / "database.db";
   const CommandResult extract =
@@ -272,16 +272,32 @@ TEST_F(CliSyntheticTest, SequentialPairsLeaveTheLoopOpen) {
     }
   }
 
+  // Vocabulary-tree loop detection on the same database (sequential pairs are resumed)
+  // finds the loop pair without trying every pair.
+  const CommandResult guided = RunLoopsfm(
+      {"-q", "match", "-d", db.string(), "--pairs", "vocabtree", "--overlap", "3"});
+  ASSERT_EQ(guided.exit_code, 0) << guided;
+  {
+    const Database database = Database::Open(db.string());
+    int loop_inliers = 0;
+    for (const VerifiedPair& pair : database.ReadVerifiedPairs()) {
+      if (pair.pair == ImagePair(first, last)) loop_inliers = pair.num_inliers;
+    }
+    EXPECT_GE(loop_inliers, 50) << "vocabtree should verify the loop pair (first, last)";
+    const size_t all_pairs = kNumFrames * (kNumFrames - 1) / 2;
+    EXPECT_LT(database.NumMatchedPairs(), all_pairs) << "vocabtree tried every pair";
+    std::cout << "[ info     ] vocabtree: first-last pair " << loop_inliers << " inliers, "
+              << database.NumMatchedPairs() << " of " << all_pairs << " pairs tried\n";
+  }
+  EXPECT_TRUE(fs::exists(tmp / "database_similarity.png"));
+  EXPECT_TRUE(fs::exists(tmp / "database_matches.png"));
+
+  // Exhaustive matching confirms the pair is a real overlap, found either way.
   const CommandResult exhaustive =
       RunLoopsfm({"-q", "match", "-d", db.string(), "--pairs", "exhaustive"});
   ASSERT_EQ(exhaustive.exit_code, 0) << exhaustive;
   const Database database = Database::Open(db.string());
-  int loop_inliers = 0;
-  for (const VerifiedPair& pair : database.ReadVerifiedPairs()) {
-    if (pair.pair == ImagePair(first, last)) loop_inliers = pair.num_inliers;
-  }
-  EXPECT_GE(loop_inliers, 50) << "the first and last frames should overlap (a loop)";
-  std::cout << "[ info     ] first-last pair: " << loop_inliers << " inliers under exhaustive\n";
+  EXPECT_TRUE(database.ExistsMatches(first, last));
 }
 
 }  // namespace

@@ -317,7 +317,7 @@ Eigen::MatrixXf ImageDatabase::SimilarityMatrix() const {
   // row starts aligned), scored by a dense product into the lower triangle.
   const double fraction =
       options_.norm == TfIdfNorm::kL2 ? kDenseFractionL2 : kDenseFractionL1;
-  const double min_dense = std::max<double>(kMinDensePostings, (getenv("TUNE_FRAC") ? atof(getenv("TUNE_FRAC")) : fraction) * n);  // TUNING
+  const double min_dense = std::max<double>(kMinDensePostings, fraction * n);
   std::vector<uint32_t> frequent;
   for (int w = 0; w < num_words_; ++w) {
     if (word_begin_[w + 1] - word_begin_[w] >= min_dense) frequent.push_back(w);
@@ -388,11 +388,7 @@ ImageDatabase BuildImageDatabase(const VocabularyTree& tree, const std::vector<i
                                  const std::vector<const FeatureDescriptors*>& descriptors,
                                  const ImageDatabaseOptions& options) {
   LOOPSFM_CHECK_EQ(image_ids.size(), descriptors.size());
-  std::vector<std::vector<uint32_t>> words(image_ids.size());
-  tbb::parallel_for(size_t{0}, image_ids.size(), [&](size_t i) {
-    LOOPSFM_CHECK(descriptors[i] != nullptr);
-    words[i] = tree.QuantizeAll(*descriptors[i]);
-  });
+  const std::vector<std::vector<uint32_t>> words = tree.QuantizeAll(descriptors);
   ImageDatabase database(tree.NumWords(), options);
   for (size_t i = 0; i < image_ids.size(); ++i) database.AddImage(image_ids[i], words[i]);
   database.Finalize();

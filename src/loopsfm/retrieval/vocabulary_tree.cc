@@ -187,14 +187,64 @@ uint32_t VocabularyTree::Quantize(const uint8_t* descriptor) const {
   return node_word_[index];
 }
 
+void VocabularyTree::Descend(uint32_t node, const uint8_t* const* rows, uint32_t* indices,
+                             uint32_t* scratch, uint32_t* labels, size_t count,
+                             uint32_t* words) const {
+  const Node& parent = nodes_[node];
+  if (parent.num_children == 0) {
+    for (size_t i = 0; i < count; ++i) words[indices[i]] = node_word_[node];
+    return;
+  }
+  const int k = static_cast<int>(parent.num_children);
+  const float* centres = centres_.row(parent.first_child).data();
+  const float* norms = squared_norms_.data() + parent.first_child;
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, count, 256), [&](const auto& range) {
+    alignas(64) float x[kDescriptorDim];
+    for (size_t i = range.begin(); i < range.end(); ++i) {
+      internal::ToFloat(rows[indices[i]], x);
+      labels[i] = static_cast<uint32_t>(internal::NearestCentre(x, centres, norms, k));
+    }
+  });
+  // Counting sort of the indices by child, then each child's range in turn (in parallel).
+  std::vector<size_t> begin(k + 1, 0);
+  for (size_t i = 0; i < count; ++i) ++begin[labels[i] + 1];
+  for (int j = 0; j < k; ++j) begin[j + 1] += begin[j];
+  std::vector<size_t> next(begin.begin(), begin.end() - 1);
+  for (size_t i = 0; i < count; ++i) scratch[next[labels[i]]++] = indices[i];
+  std::copy(scratch, scratch + count, indices);
+  tbb::parallel_for(0, k, [&](int j) {
+    if (begin[j + 1] == begin[j]) return;
+    Descend(parent.first_child + j, rows, indices + begin[j], scratch + begin[j],
+            labels + begin[j], begin[j + 1] - begin[j], words);
+  });
+}
+
 std::vector<uint32_t> VocabularyTree::QuantizeAll(const FeatureDescriptors& descriptors) const {
-  std::vector<uint32_t> words(descriptors.rows());
-  tbb::parallel_for(tbb::blocked_range<int64_t>(0, descriptors.rows(), 256),
-                    [&](const auto& range) {
-                      for (int64_t i = range.begin(); i < range.end(); ++i) {
-                        words[i] = Quantize(descriptors.data() + i * kDescriptorDim);
-                      }
-                    });
+  return QuantizeAll(std::vector<const FeatureDescriptors*>{&descriptors})[0];
+}
+
+std::vector<std::vector<uint32_t>> VocabularyTree::QuantizeAll(
+    const std::vector<const FeatureDescriptors*>& descriptor_sets) const {
+  LOOPSFM_CHECK_MSG(!Empty(), "quantising with an empty vocabulary tree");
+  std::vector<const uint8_t*> rows;
+  for (const FeatureDescriptors* set : descriptor_sets) {
+    LOOPSFM_CHECK(set != nullptr);
+    for (int64_t i = 0; i < set->rows(); ++i) rows.push_back(set->row(i).data());
+  }
+  LOOPSFM_CHECK_LT(rows.size(), size_t{std::numeric_limits<uint32_t>::max()});
+  std::vector<uint32_t> indices(rows.size()), scratch(rows.size()), labels(rows.size());
+  std::vector<uint32_t> all_words(rows.size());
+  for (size_t i = 0; i < rows.size(); ++i) indices[i] = static_cast<uint32_t>(i);
+  if (!rows.empty()) {
+    Descend(0, rows.data(), indices.data(), scratch.data(), labels.data(), rows.size(),
+            all_words.data());
+  }
+  std::vector<std::vector<uint32_t>> words;
+  size_t offset = 0;
+  for (const FeatureDescriptors* set : descriptor_sets) {
+    words.emplace_back(all_words.begin() + offset, all_words.begin() + offset + set->rows());
+    offset += set->rows();
+  }
   return words;
 }
 

@@ -66,8 +66,13 @@ class VocabularyTree {
 
   // Word of one 128-byte descriptor, by greedy descent. Thread-safe.
   uint32_t Quantize(const uint8_t* descriptor) const;
-  // Word of each row, in parallel; equal to Quantize row by row.
+  // Word of each row, equal to Quantize row by row. Descends with all the descriptors that
+  // reach a node together, so its centres are read from memory once: much faster than
+  // Quantize in a loop for large trees, and faster still for many images in one call.
   std::vector<uint32_t> QuantizeAll(const FeatureDescriptors& descriptors) const;
+  // Words of each set (e.g. every image of a scene) in one descent.
+  std::vector<std::vector<uint32_t>> QuantizeAll(
+      const std::vector<const FeatureDescriptors*>& descriptor_sets) const;
 
   // Centre of a word's leaf (the mean of the training descriptors that reached it).
   Eigen::Matrix<float, kDescriptorDim, 1> WordCentre(uint32_t word) const;
@@ -87,6 +92,10 @@ class VocabularyTree {
     uint32_t first_child = 0;   // children are nodes first_child .. first_child + num_children - 1
     uint32_t num_children = 0;  // 0 for a leaf
   };
+  // Sends the descriptors rows[indices[0 .. count)] down from `node`, writing their words to
+  // words[index]; reorders indices (scratch and labels are work space of the same size).
+  void Descend(uint32_t node, const uint8_t* const* rows, uint32_t* indices, uint32_t* scratch,
+               uint32_t* labels, size_t count, uint32_t* words) const;
   // Numbers the leaves in node order and fills the derived arrays. False when the nodes do not
   // form a breadth-first tree matching the centres.
   bool Finish();
