@@ -309,10 +309,12 @@ def run_colmap(args, bench_set, image_dir, run_dir):
     if bench_set.pairs == "exhaustive":
         match = [colmap, "exhaustive_matcher"]
     else:
-        # Plain window of `overlap` following frames, as loopsfm's sequential pairing (COLMAP's
-        # default also adds i + 2^k pairs, which loopsfm does not).
+        # Plain window of `overlap` following frames, as loopsfm's sequential pairing. COLMAP
+        # 3.8 pairs image i with i + 0 .. i + overlap - 1 (the self pair is dropped), so it
+        # needs overlap + 1 for `overlap` following frames; its default also adds i + 2^k
+        # pairs, which loopsfm does not.
         match = [colmap, "sequential_matcher", "--SequentialMatching.overlap",
-                 str(bench_set.overlap), "--SequentialMatching.quadratic_overlap", "0"]
+                 str(bench_set.overlap + 1), "--SequentialMatching.quadratic_overlap", "0"]
     match += ["--database_path", str(db), "--SiftMatching.use_gpu", "0",
               "--SiftMatching.num_threads", threads]
     mapper = [colmap, "mapper", "--database_path", str(db), "--image_path", str(image_dir),
@@ -375,6 +377,8 @@ def bench_one_set(args, bench_set, workdir):
         # Alternate which tool goes first, so slow drift of the machine load hits both alike.
         order = ["loopsfm", "colmap"] if r % 2 == 0 else ["colmap", "loopsfm"]
         for tool in order:
+            if tool not in args.tools:
+                continue
             if tool == "loopsfm":
                 runs["loopsfm"].append(run_loopsfm(args, bench_set, run_dir))
             else:
@@ -496,6 +500,8 @@ def parse_args(argv):
                              "(default /tmp/loopsfm_vs_colmap)")
     parser.add_argument("--json", type=Path, metavar="FILE",
                         help="also write all results (medians and every run) as JSON to FILE")
+    parser.add_argument("--tools", default="loopsfm,colmap",
+                        help="which tools to run (default loopsfm,colmap)")
     parser.add_argument("--pairs", choices=["exhaustive", "sequential"],
                         help="override every set's pairing")
     parser.add_argument("--overlap", type=int, default=10,
@@ -513,6 +519,9 @@ def parse_args(argv):
     parser.add_argument("--ffmpeg", default="ffmpeg", help="ffmpeg binary (default ffmpeg)")
     args = parser.parse_args(argv)
     args.sets = ALL_SETS if args.sets == "all" else [s for s in args.sets.split(",") if s]
+    args.tools = [t for t in args.tools.split(",") if t]
+    if not args.tools or any(t not in ("loopsfm", "colmap") for t in args.tools):
+        parser.error("--tools takes loopsfm, colmap or loopsfm,colmap")
     if args.runs < 1:
         parser.error("--runs must be at least 1")
     if args.threads < 0:

@@ -38,8 +38,9 @@ void AddMatchCommand(CLI::App& app) {
   cmd->add_option("--json-report", flags->json_report,
                   "Also write the stage report (pairs tried and verified, timings) as JSON");
   cmd->callback([flags] {
-    const MatchOptions options = flags->match.Resolve();
     Database database = OpenExistingDatabase(flags->database);
+    const MatchOptions options =
+        flags->match.Resolve(database.ReadMeta("source_kind").value_or("") == "video");
     const MatchReport report = MatchPairs(database, options);
     spdlog::info(
         "match ({}): {} pairs ({} already stored), {} matched now, {} verified, {:.0f} mean "

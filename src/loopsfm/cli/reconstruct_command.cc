@@ -4,6 +4,7 @@
 #include "loopsfm/cli/stage_flags.h"
 #include "loopsfm/pipeline/reconstruct.h"
 #include "loopsfm/util/logging.h"
+#include "loopsfm/video/frame_source.h"
 
 namespace loopsfm::cli {
 namespace {
@@ -51,7 +52,7 @@ void AddReconstructCommand(CLI::App& app) {
   cmd->callback([flags] {
     ReconstructOptions options;
     options.extract = flags->extract.Resolve();
-    options.match = flags->match.Resolve();
+    options.match = flags->match.Resolve(OpenFrameSource(flags->input)->Info().kind == SourceKind::kVideo);
     options.mapper.num_threads = Common().threads;
     options.write_text = flags->text;
     options.show_progress = !Common().quiet;

@@ -36,9 +36,9 @@ ExtractOptions ExtractFlags::Resolve() const {
 
 void AddMatchFlags(CLI::App* cmd, MatchFlags* flags) {
   cmd->add_option("--pairs", flags->pairs,
-                  "Pairing strategy: exhaustive | sequential (default) | vocabtree (sequential "
-                  "neighbours plus vocabulary-tree loop detection) | lowres (exhaustive with a "
-                  "low-resolution prefilter)");
+                  "Pairing strategy: exhaustive | sequential (default for image folders) | "
+                  "vocabtree (sequential neighbours plus vocabulary-tree loop detection; default "
+                  "for video) | lowres (exhaustive with a low-resolution prefilter)");
   cmd->add_option("--vocab", flags->vocab, "Vocabulary tree file from `loopsfm vocab build` "
                   "(default: train one on the scene's own descriptors)");
   cmd->add_option("--vocab-branching", flags->options.vocab_tree.branching,
@@ -66,9 +66,11 @@ void AddMatchFlags(CLI::App* cmd, MatchFlags* flags) {
       ->capture_default_str();
 }
 
-MatchOptions MatchFlags::Resolve() const {
+MatchOptions MatchFlags::Resolve(bool video_input) const {
   MatchOptions resolved = options;
-  resolved.strategy = ParsePairStrategy(pairs.empty() ? "sequential" : pairs);
+  // Video: sequential neighbours plus loop detection, so loops are found without a flag.
+  const std::string fallback = video_input ? "vocabtree" : "sequential";
+  resolved.strategy = ParsePairStrategy(pairs.empty() ? fallback : pairs);
   if (mutual) resolved.matcher.cross_check = true;
   // The wider window of the first frames is never narrower than the requested overlap.
   resolved.sequential.initial_overlap =

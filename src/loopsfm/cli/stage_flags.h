@@ -22,12 +22,13 @@ struct ExtractFlags {
 void AddExtractFlags(CLI::App* cmd, ExtractFlags* flags);
 
 struct MatchFlags {
-  // Empty: the default for the input (sequential).
+  // Empty: the default for the input (vocabtree for video, sequential for image folders).
   std::string pairs;
   MatchOptions options;
   bool mutual = false;
   std::string vocab;
-  MatchOptions Resolve() const;
+  // `video_input`: the frames came from a video (picks the default strategy).
+  MatchOptions Resolve(bool video_input) const;
 };
 void AddMatchFlags(CLI::App* cmd, MatchFlags* flags);
 

@@ -98,6 +98,8 @@ ExtractReport ExtractFeatures(const std::filesystem::path& input, Database& data
   const int previous_cv_threads = cv::getNumThreads();
   cv::setNumThreads(1);
 
+  // Later stages pick defaults by the kind of input (e.g. loop detection for video).
+  database.WriteMeta("source_kind", source->Info().kind == SourceKind::kVideo ? "video" : "images");
   const int expected = source->Info().expected_frames / options.keyframes.every;
   Progress progress("extract", expected > 0 ? expected : 0, options.show_progress);
   ExtractReport report;

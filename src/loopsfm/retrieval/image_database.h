@@ -36,6 +36,8 @@ enum class TfIdfNorm { kL1, kL2 };
 
 struct ImageDatabaseOptions {
   // Normalisation of the TF-IDF vectors, which also picks the score (see the file comment).
+  // Measured on real sequences, L1 and L2 retrieve equally well with ~100k-word trees (L1 is
+  // ahead by up to 2 points with ~10k words); L2's similarity matrix uses a GEMM.
   TfIdfNorm norm = TfIdfNorm::kL2;
   // Throws loopsfm::InvalidArgument with a readable message.
   void Check() const;

@@ -63,8 +63,9 @@ std::vector<int64_t> SeedCentres(const uint8_t* rows, int64_t n, int k, Random& 
 // Assigns every row to its nearest centre; returns how many labels changed.
 int64_t Assign(const uint8_t* rows, int64_t n, const DescriptorCentres& centres,
                std::vector<uint32_t>& labels) {
-  const Eigen::VectorXf squared_norms = centres.rowwise().squaredNorm();
   const int k = static_cast<int>(centres.rows());
+  std::vector<float> squared_norms(k);
+  for (int j = 0; j < k; ++j) squared_norms[j] = internal::SquaredNorm128(centres.row(j).data());
   std::atomic<int64_t> changed = 0;
   tbb::parallel_for(tbb::blocked_range<int64_t>(0, n, kGrain), [&](const auto& range) {
     alignas(64) float x[kDescriptorDim];

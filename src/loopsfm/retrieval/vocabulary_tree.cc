@@ -13,6 +13,8 @@ namespace loopsfm {
 namespace {
 
 constexpr uint32_t kNoWord = std::numeric_limits<uint32_t>::max();
+// QuantizeAll descends node by node while at least this many descriptors share a node.
+constexpr size_t kMinGroupedDescent = 64;
 
 // A node whose descriptors are rows [begin, end) of the (reordered) training matrix.
 struct PendingNode {
@@ -107,7 +109,7 @@ VocabularyTree VocabularyTree::Train(FeatureDescriptors data, const VocabTreeOpt
   tree.branching_ = options.branching;
   tree.depth_ = options.depth;
   tree.nodes_.emplace_back();
-  std::vector<float> centres(kDescriptorDim, 0.0f);  // the root's centre is unused
+  tree.centres_.assign(kDescriptorDim, 0.0f);  // the root's centre is unused
   std::vector<PendingNode> level = {{0, 0, data.rows()}};
   for (int depth = 0; depth < options.depth && !level.empty(); ++depth) {
     std::vector<KMeansResult> splits(level.size());
@@ -124,8 +126,11 @@ VocabularyTree VocabularyTree::Train(FeatureDescriptors data, const VocabTreeOpt
       splits[i] = std::move(split);
     });
     std::vector<PendingNode> next;
+    size_t num_new = 0;
+    for (const KMeansResult& split : splits) num_new += split.centres.rows();
+    tree.centres_.reserve(tree.centres_.size() + num_new * kDescriptorDim);
     for (size_t i = 0; i < level.size(); ++i) {
-      const KMeansResult& split = splits[i];
+      KMeansResult& split = splits[i];
       const int num_children = static_cast<int>(split.centres.rows());
       if (num_children == 0) continue;
       tree.nodes_[level[i].node] = {static_cast<uint32_t>(tree.nodes_.size()),
@@ -135,21 +140,19 @@ VocabularyTree VocabularyTree::Train(FeatureDescriptors data, const VocabTreeOpt
         next.push_back({static_cast<uint32_t>(tree.nodes_.size()), begin, begin + split.sizes[j]});
         begin += split.sizes[j];
         tree.nodes_.emplace_back();
-        centres.insert(centres.end(), split.centres.row(j).data(),
-                       split.centres.row(j).data() + kDescriptorDim);
+        tree.centres_.insert(tree.centres_.end(), split.centres.row(j).data(),
+                             split.centres.row(j).data() + kDescriptorDim);
       }
+      split = KMeansResult();  // frees its centres
     }
     level = std::move(next);
   }
-  tree.centres_ = Eigen::Map<const DescriptorCentres>(centres.data(),
-                                                      static_cast<int64_t>(tree.nodes_.size()),
-                                                      kDescriptorDim);
   LOOPSFM_CHECK(tree.Finish());
   return tree;
 }
 
 bool VocabularyTree::Finish() {
-  if (nodes_.empty() || centres_.rows() != static_cast<int64_t>(nodes_.size())) return false;
+  if (nodes_.empty() || centres_.size() != nodes_.size() * kDescriptorDim) return false;
   // Breadth-first layout: the children of the nodes, in node order, are nodes 1, 2, ...
   uint64_t expected_child = 1;
   num_words_ = 0;
@@ -168,19 +171,26 @@ bool VocabularyTree::Finish() {
   }
   if (expected_child != nodes_.size()) return false;
   num_words_ = static_cast<int>(word_node_.size());
-  squared_norms_ = centres_.rowwise().squaredNorm();
+  squared_norms_.resize(nodes_.size());
+  for (size_t i = 0; i < nodes_.size(); ++i) {
+    squared_norms_[i] = internal::SquaredNorm128(Centre(static_cast<uint32_t>(i)));
+  }
   return true;
 }
 
 uint32_t VocabularyTree::Quantize(const uint8_t* descriptor) const {
   LOOPSFM_CHECK_MSG(!Empty(), "quantising with an empty vocabulary tree");
+  return DescendOne(0, descriptor);
+}
+
+uint32_t VocabularyTree::DescendOne(uint32_t node, const uint8_t* descriptor) const {
   alignas(64) float x[kDescriptorDim];
   internal::ToFloat(descriptor, x);
-  uint32_t index = 0;
+  uint32_t index = node;
   while (nodes_[index].num_children > 0) {
     const Node& node = nodes_[index];
     index = node.first_child +
-            internal::NearestCentre(x, centres_.row(node.first_child).data(),
+            internal::NearestCentre(x, Centre(node.first_child),
                                     squared_norms_.data() + node.first_child,
                                     static_cast<int>(node.num_children));
   }
@@ -195,8 +205,12 @@ void VocabularyTree::Descend(uint32_t node, const uint8_t* const* rows, uint32_t
     for (size_t i = 0; i < count; ++i) words[indices[i]] = node_word_[node];
     return;
   }
+  if (count < kMinGroupedDescent) {  // too few to share centres: one at a time
+    for (size_t i = 0; i < count; ++i) words[indices[i]] = DescendOne(node, rows[indices[i]]);
+    return;
+  }
   const int k = static_cast<int>(parent.num_children);
-  const float* centres = centres_.row(parent.first_child).data();
+  const float* centres = Centre(parent.first_child);
   const float* norms = squared_norms_.data() + parent.first_child;
   tbb::parallel_for(tbb::blocked_range<size_t>(0, count, 256), [&](const auto& range) {
     alignas(64) float x[kDescriptorDim];
@@ -250,12 +264,12 @@ std::vector<std::vector<uint32_t>> VocabularyTree::QuantizeAll(
 
 Eigen::Matrix<float, kDescriptorDim, 1> VocabularyTree::WordCentre(uint32_t word) const {
   LOOPSFM_CHECK_LT(word, word_node_.size());
-  return centres_.row(word_node_[word]).transpose();
+  return Eigen::Map<const Eigen::Matrix<float, kDescriptorDim, 1>>(Centre(word_node_[word]));
 }
 
 bool operator==(const VocabularyTree& a, const VocabularyTree& b) {
   if (a.branching_ != b.branching_ || a.depth_ != b.depth_ || a.nodes_.size() != b.nodes_.size() ||
-      a.centres_.rows() != b.centres_.rows()) {
+      a.centres_.size() != b.centres_.size()) {
     return false;
   }
   for (size_t i = 0; i < a.nodes_.size(); ++i) {
@@ -264,7 +278,7 @@ bool operator==(const VocabularyTree& a, const VocabularyTree& b) {
       return false;
     }
   }
-  return a.centres_.size() == 0 ||
+  return a.centres_.empty() ||
          std::memcmp(a.centres_.data(), b.centres_.data(), a.centres_.size() * sizeof(float)) == 0;
 }
 
