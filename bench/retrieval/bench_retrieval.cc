@@ -10,8 +10,6 @@
 //
 //   bench_retrieval [--benchmark_filter=Similarity]
 
-#include <benchmark/benchmark.h>
-
 #include <algorithm>
 #include <cmath>
 #include <map>
@@ -19,6 +17,7 @@
 #include <vector>
 
 #include <Eigen/SparseCore>
+#include <benchmark/benchmark.h>
 #include <tbb/global_control.h>
 
 #include "loopsfm/math/random.h"
@@ -41,8 +40,8 @@ std::vector<std::vector<uint32_t>> ZipfImages(int num_images, uint64_t seed) {
   for (auto& words : images) {
     words.resize(kWordsPerImage);
     for (auto& w : words) {
-      w = static_cast<uint32_t>(std::lower_bound(cdf.begin(), cdf.end(), random.UniformReal(0, total)) -
-                                cdf.begin());
+      w = static_cast<uint32_t>(
+          std::lower_bound(cdf.begin(), cdf.end(), random.UniformReal(0, total)) - cdf.begin());
       w = std::min<uint32_t>(w, kNumWords - 1);
     }
   }
@@ -64,8 +63,8 @@ const ImageDatabase& Database(int num_images, TfIdfNorm norm = TfIdfNorm::kL2) {
 }
 
 void BM_SimilarityMatrix(benchmark::State& state) {
-  const ImageDatabase& database = Database(
-      static_cast<int>(state.range(0)), state.range(1) == 1 ? TfIdfNorm::kL1 : TfIdfNorm::kL2);
+  const ImageDatabase& database = Database(static_cast<int>(state.range(0)),
+                                           state.range(1) == 1 ? TfIdfNorm::kL1 : TfIdfNorm::kL2);
   for (auto _ : state) benchmark::DoNotOptimize(database.SimilarityMatrix());
   state.counters["nnz_per_image"] = static_cast<double>(database.ImageVector(0).size());
 }
@@ -75,7 +74,8 @@ void BM_SimilarityMatrixEigenSparse(benchmark::State& state) {
   const ImageDatabase& database = Database(n);
   std::vector<Eigen::Triplet<float>> triplets;
   for (int i = 0; i < n; ++i) {
-    for (const auto& [word, weight] : database.ImageVector(i)) triplets.emplace_back(i, word, weight);
+    for (const auto& [word, weight] : database.ImageVector(i))
+      triplets.emplace_back(i, word, weight);
   }
   Eigen::SparseMatrix<float, Eigen::RowMajor> vectors(n, kNumWords);
   vectors.setFromTriplets(triplets.begin(), triplets.end());
@@ -99,7 +99,8 @@ FeatureDescriptors SiftLike(int count, uint64_t seed) {
   FeatureDescriptors out(count, kDescriptorDim);
   for (int i = 0; i < count; ++i) {
     Eigen::Matrix<float, kDescriptorDim, 1> d;
-    for (int k = 0; k < kDescriptorDim; ++k) d(k) = static_cast<float>(std::pow(random.Normal(), 2));
+    for (int k = 0; k < kDescriptorDim; ++k)
+      d(k) = static_cast<float>(std::pow(random.Normal(), 2));
     d.normalize();
     for (int k = 0; k < kDescriptorDim; ++k) {
       out(i, k) = static_cast<uint8_t>(std::min(255.0f, std::round(512.0f * d(k))));

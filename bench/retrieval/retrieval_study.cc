@@ -27,13 +27,12 @@
 #include <string>
 #include <vector>
 
+#include <Eigen/Geometry>
 #include <fmt/format.h>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 #include <opencv2/videoio.hpp>
 #include <tbb/parallel_for.h>
-
-#include <Eigen/Geometry>
 
 #include "loopsfm/feature/sift.h"
 #include "loopsfm/retrieval/image_database.h"
@@ -221,9 +220,10 @@ Row Evaluate(const VocabularyTree& tree, const Sequence& sequence) {
       over_eighth += p * 8 > static_cast<int>(words.size());
       max_postings = std::max(max_postings, p);
     }
-    std::printf("  stats: %.0f distinct words per frame, %.3g pair-ops, %d words in > 1/8 of the "
-                "frames, max %d frames\n",
-                distinct / words.size(), pair_ops, over_eighth, max_postings);
+    std::printf(
+        "  stats: %.0f distinct words per frame, %.3g pair-ops, %d words in > 1/8 of the "
+        "frames, max %d frames\n",
+        distinct / words.size(), pair_ops, over_eighth, max_postings);
   }
   for (const TfIdfNorm norm : {TfIdfNorm::kL1, TfIdfNorm::kL2}) {
     ImageDatabaseOptions options;
@@ -252,8 +252,8 @@ std::vector<std::string> Split(const std::string& s, char separator) {
 }
 
 int Main(int argc, char** argv) {
-  std::vector<std::pair<int, int>> configs = {{10, 4}, {10, 5}, {32, 3}, {64, 2}, {100, 2},
-                                              {256, 2}};
+  std::vector<std::pair<int, int>> configs = {{10, 4}, {10, 5},  {32, 3},
+                                              {64, 2}, {100, 2}, {256, 2}};
   std::vector<int> samples = {250000};
   std::vector<int> iterations = {10};
   uint64_t seed = kDefaultRandomSeed;
@@ -282,8 +282,9 @@ int Main(int argc, char** argv) {
     }
   }
   if (folders.empty()) {
-    std::fprintf(stderr, "usage: retrieval_study [--configs=10x4,...] [--samples=N,...] "
-                         "[--iterations=N,...] [--seed=N] FOLDER...\n");
+    std::fprintf(stderr,
+                 "usage: retrieval_study [--configs=10x4,...] [--samples=N,...] "
+                 "[--iterations=N,...] [--seed=N] FOLDER...\n");
     return 2;
   }
   std::vector<Sequence> sequences;
@@ -296,8 +297,8 @@ int Main(int argc, char** argv) {
                 static_cast<long long>(sequences.back().NumDescriptors()), loop_frames);
   }
   std::printf("\n%-22s %-22s %5s %3s %8s %5s %7s %8s %8s %7s %7s %7s %7s %7s\n", "trained on",
-              "evaluated on", "k", "L", "sample", "iters", "words", "train_s", "quant_ms",
-              "sim_ms", "P5_L1", "P5_L2", "R1_L1", "R1_L2");
+              "evaluated on", "k", "L", "sample", "iters", "words", "train_s", "quant_ms", "sim_ms",
+              "P5_L1", "P5_L2", "R1_L1", "R1_L2");
   for (const Sequence& train_on : sequences) {
     for (const auto& [k, depth] : configs) {
       for (const int sample : samples) {
@@ -314,11 +315,11 @@ int Main(int argc, char** argv) {
           for (const Sequence& evaluate_on : sequences) {
             if (&train_on != &sequences[0] && &evaluate_on != &train_on) continue;
             const Row row = Evaluate(tree, evaluate_on);
-            std::printf("%-22s %-22s %5d %3d %8d %5d %7d %8.2f %8.2f %7.1f %7.3f %7.3f %7.3f %7.3f\n",
-                        train_on.name.c_str(), evaluate_on.name.c_str(), k, depth, sample, iters,
-                        tree.NumWords(), train_s, row.quantize_ms_per_frame, row.similarity_ms,
-                        row.precision[0], row.precision[1], row.loop_recall[0],
-                        row.loop_recall[1]);
+            std::printf(
+                "%-22s %-22s %5d %3d %8d %5d %7d %8.2f %8.2f %7.1f %7.3f %7.3f %7.3f %7.3f\n",
+                train_on.name.c_str(), evaluate_on.name.c_str(), k, depth, sample, iters,
+                tree.NumWords(), train_s, row.quantize_ms_per_frame, row.similarity_ms,
+                row.precision[0], row.precision[1], row.loop_recall[0], row.loop_recall[1]);
             std::fflush(stdout);
           }
         }

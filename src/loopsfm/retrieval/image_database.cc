@@ -19,8 +19,8 @@ constexpr uint32_t kNoIndex = std::numeric_limits<uint32_t>::max();
 // while the dense matrix stays under kMaxDenseBytes. A sparse list costs about n_w^2 / 2
 // scattered additions, a dense column n^2 / 2 vectorised ones; the fractions are where the two
 // cost the same in bench_retrieval.
-constexpr double kDenseFractionL2 = 1.0 / 8;   // GEMM
-constexpr double kDenseFractionL1 = 1.0 / 4;   // vectorised min-sum
+constexpr double kDenseFractionL2 = 1.0 / 8;  // GEMM
+constexpr double kDenseFractionL1 = 1.0 / 4;  // vectorised min-sum
 constexpr size_t kMinDensePostings = 64;
 constexpr size_t kMaxDenseBytes = size_t{512} << 20;
 // Rows per task of the dense product (fixed, so results do not depend on the thread count).
@@ -80,9 +80,10 @@ void CountWords(std::vector<uint32_t> words, int num_words, std::vector<uint32_t
   std::sort(words.begin(), words.end());
   for (size_t i = 0; i < words.size();) {
     if (words[i] >= static_cast<uint32_t>(num_words)) {
-      throw InvalidArgument(fmt::format("visual word {} is out of range: the database has {} words "
-                                        "(was the image quantised with another tree?)",
-                                        words[i], num_words));
+      throw InvalidArgument(
+          fmt::format("visual word {} is out of range: the database has {} words "
+                      "(was the image quantised with another tree?)",
+                      words[i], num_words));
     }
     size_t j = i + 1;
     while (j < words.size() && words[j] == words[i]) ++j;
@@ -127,8 +128,8 @@ inline float Term(float a, float b) {
 }  // namespace
 
 void ImageDatabaseOptions::Check() const {
-  LOOPSFM_REQUIRE_OPTION(norm == TfIdfNorm::kL1 || norm == TfIdfNorm::kL2,
-                         "unknown TF-IDF norm {}", static_cast<int>(norm));
+  LOOPSFM_REQUIRE_OPTION(norm == TfIdfNorm::kL1 || norm == TfIdfNorm::kL2, "unknown TF-IDF norm {}",
+                         static_cast<int>(norm));
 }
 
 ImageDatabase::ImageDatabase(int num_words, const ImageDatabaseOptions& options)
@@ -259,8 +260,8 @@ std::vector<ImageScore> ImageDatabase::Rank(const float* scores, uint32_t exclud
   const auto better = [&](uint32_t a, uint32_t b) {
     return scores[a] > scores[b] || (scores[a] == scores[b] && a < b);
   };
-  const size_t count = max_results > 0 ? std::min<size_t>(max_results, candidates.size())
-                                       : candidates.size();
+  const size_t count =
+      max_results > 0 ? std::min<size_t>(max_results, candidates.size()) : candidates.size();
   std::partial_sort(candidates.begin(), candidates.begin() + count, candidates.end(), better);
   std::vector<ImageScore> ranked(count);
   for (size_t i = 0; i < count; ++i) ranked[i] = {image_ids_[candidates[i]], scores[candidates[i]]};
@@ -315,8 +316,7 @@ Eigen::MatrixXf ImageDatabase::SimilarityMatrix() const {
 
   // Words in many images: a dense n x m matrix (m padded to whole cache lines, so that every
   // row starts aligned), scored by a dense product into the lower triangle.
-  const double fraction =
-      options_.norm == TfIdfNorm::kL2 ? kDenseFractionL2 : kDenseFractionL1;
+  const double fraction = options_.norm == TfIdfNorm::kL2 ? kDenseFractionL2 : kDenseFractionL1;
   const double min_dense = std::max<double>(kMinDensePostings, fraction * n);
   std::vector<uint32_t> frequent;
   for (int w = 0; w < num_words_; ++w) {

@@ -1,10 +1,9 @@
 #include "loopsfm/retrieval/image_database.h"
 
-#include <gtest/gtest.h>
-
 #include <cmath>
 #include <set>
 
+#include <gtest/gtest.h>
 #include <tbb/global_control.h>
 
 #include "loopsfm/retrieval/retrieval_test_data.h"
@@ -112,8 +111,7 @@ TEST_P(ImageDatabaseNormTest, RetrievesNeighboursOnAPath) {
   tree_options.branching = 16;
   tree_options.depth = 3;
   const VocabularyTree tree = VocabularyTree::Train(sets, tree_options, random);
-  const ImageDatabase database =
-      BuildImageDatabase(tree, images.ids, sets, WithNorm(GetParam()));
+  const ImageDatabase database = BuildImageDatabase(tree, images.ids, sets, WithNorm(GetParam()));
   ASSERT_EQ(database.NumImages(), 40);
   EXPECT_EQ(database.ImageIds(), images.ids);
 
@@ -217,8 +215,7 @@ TEST_P(ImageDatabaseNormTest, SimilarityMatrixMatchesBruteForce) {
 }
 
 INSTANTIATE_TEST_SUITE_P(Norms, ImageDatabaseNormTest,
-                         ::testing::Values(TfIdfNorm::kL1, TfIdfNorm::kL2),
-                         [](const auto& info) {
+                         ::testing::Values(TfIdfNorm::kL1, TfIdfNorm::kL2), [](const auto& info) {
                            return info.param == TfIdfNorm::kL1 ? "L1" : "L2";
                          });
 

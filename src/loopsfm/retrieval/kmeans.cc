@@ -115,8 +115,7 @@ void KMeansOptions::Check() const {
   LOOPSFM_REQUIRE_OPTION(num_clusters >= 1, "k-means needs at least one cluster, got {}",
                          num_clusters);
   LOOPSFM_REQUIRE_OPTION(max_iterations >= 0 && max_iterations <= 10000,
-                         "k-means iterations must be between 0 and 10000, got {}",
-                         max_iterations);
+                         "k-means iterations must be between 0 and 10000, got {}", max_iterations);
 }
 
 KMeansResult KMeans(const uint8_t* rows, int64_t num_rows, const KMeansOptions& options,

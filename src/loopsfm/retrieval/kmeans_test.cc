@@ -1,9 +1,8 @@
 #include "loopsfm/retrieval/kmeans.h"
 
-#include <gtest/gtest.h>
-
 #include <set>
 
+#include <gtest/gtest.h>
 #include <tbb/global_control.h>
 
 #include "loopsfm/retrieval/retrieval_test_data.h"

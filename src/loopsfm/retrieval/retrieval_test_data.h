@@ -24,8 +24,8 @@ inline FeatureDescriptors RandomCentres(int num_clusters, Random& random) {
 }
 
 // Appends `count` noisy copies of centre row `cluster` to `out` (resized as needed).
-inline void DrawFromCluster(const FeatureDescriptors& centres, int cluster, int count,
-                            double sigma, Random& random, FeatureDescriptors& out) {
+inline void DrawFromCluster(const FeatureDescriptors& centres, int cluster, int count, double sigma,
+                            Random& random, FeatureDescriptors& out) {
   const int64_t first = out.rows();
   out.conservativeResize(first + count, Eigen::NoChange);
   for (int i = 0; i < count; ++i) {

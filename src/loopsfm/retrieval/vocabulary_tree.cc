@@ -7,6 +7,7 @@
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
+#include "loopsfm/retrieval/kmeans.h"
 #include "loopsfm/util/errors.h"
 
 namespace loopsfm {
@@ -54,8 +55,8 @@ void VocabTreeOptions::Check() const {
 
 FeatureDescriptors SampleDescriptors(const std::vector<const FeatureDescriptors*>& descriptor_sets,
                                      int max_descriptors, Random& random) {
-  LOOPSFM_REQUIRE_OPTION(max_descriptors >= 0, "descriptor sample size must be non-negative, got {}",
-                         max_descriptors);
+  LOOPSFM_REQUIRE_OPTION(max_descriptors >= 0,
+                         "descriptor sample size must be non-negative, got {}", max_descriptors);
   int64_t total = 0;
   for (const FeatureDescriptors* set : descriptor_sets) {
     LOOPSFM_CHECK(set != nullptr);
@@ -118,8 +119,8 @@ VocabularyTree VocabularyTree::Train(FeatureDescriptors data, const VocabTreeOpt
       const int64_t count = pending.end - pending.begin;
       if (count < options.branching) return;  // too few to split: a leaf
       Random node_random = base.Derive(pending.node);
-      KMeansResult split = KMeans(data.data() + pending.begin * kDescriptorDim, count,
-                                  kmeans_options, node_random);
+      KMeansResult split =
+          KMeans(data.data() + pending.begin * kDescriptorDim, count, kmeans_options, node_random);
       if (split.centres.rows() < 2) return;  // all descriptors equal: a leaf
       PartitionRows(data, pending.begin, split);
       split.labels = {};
@@ -188,11 +189,11 @@ uint32_t VocabularyTree::DescendOne(uint32_t node, const uint8_t* descriptor) co
   internal::ToFloat(descriptor, x);
   uint32_t index = node;
   while (nodes_[index].num_children > 0) {
-    const Node& node = nodes_[index];
-    index = node.first_child +
-            internal::NearestCentre(x, Centre(node.first_child),
-                                    squared_norms_.data() + node.first_child,
-                                    static_cast<int>(node.num_children));
+    const Node& current = nodes_[index];
+    index =
+        current.first_child + internal::NearestCentre(x, Centre(current.first_child),
+                                                      squared_norms_.data() + current.first_child,
+                                                      static_cast<int>(current.num_children));
   }
   return node_word_[index];
 }
@@ -228,8 +229,8 @@ void VocabularyTree::Descend(uint32_t node, const uint8_t* const* rows, uint32_t
   std::copy(scratch, scratch + count, indices);
   tbb::parallel_for(0, k, [&](int j) {
     if (begin[j + 1] == begin[j]) return;
-    Descend(parent.first_child + j, rows, indices + begin[j], scratch + begin[j],
-            labels + begin[j], begin[j + 1] - begin[j], words);
+    Descend(parent.first_child + j, rows, indices + begin[j], scratch + begin[j], labels + begin[j],
+            begin[j + 1] - begin[j], words);
   });
 }
 

@@ -6,7 +6,8 @@
 // centre. Cost per descriptor: k * L distance evaluations, for up to k^L words.
 //
 // A tree is trained once (on a sample of the scene's own descriptors, or on any collection for
-// a generic tree) and saved to a small binary file that later runs load.
+// a generic tree) and saved to a binary file that later runs load: 520 bytes per node, about
+// 130 MB for the default 64 x 3 tree trained on 500k descriptors (~250k words).
 
 #include <cstdint>
 #include <filesystem>
@@ -15,7 +16,6 @@
 #include <Eigen/Core>
 
 #include "loopsfm/math/random.h"
-#include "loopsfm/retrieval/kmeans.h"
 #include "loopsfm/scene/features.h"
 
 namespace loopsfm {
@@ -109,16 +109,18 @@ class VocabularyTree {
   // form a breadth-first tree matching the centres.
   bool Finish();
 
-  const float* Centre(uint32_t node) const { return centres_.data() + size_t{node} * kDescriptorDim; }
+  const float* Centre(uint32_t node) const {
+    return centres_.data() + size_t{node} * kDescriptorDim;
+  }
 
   int branching_ = 0;
   int depth_ = 0;
   int num_words_ = 0;
-  std::vector<Node> nodes_;             // breadth-first; node 0 is the root
-  std::vector<float> centres_;          // 128 floats per node (the root's are unused)
-  std::vector<float> squared_norms_;    // |centre|^2 per node
-  std::vector<uint32_t> node_word_;     // word of a leaf, kNoWord for inner nodes
-  std::vector<uint32_t> word_node_;     // node of each word
+  std::vector<Node> nodes_;           // breadth-first; node 0 is the root
+  std::vector<float> centres_;        // 128 floats per node (the root's are unused)
+  std::vector<float> squared_norms_;  // |centre|^2 per node
+  std::vector<uint32_t> node_word_;   // word of a leaf, kNoWord for inner nodes
+  std::vector<uint32_t> word_node_;   // node of each word
 };
 
 }  // namespace loopsfm

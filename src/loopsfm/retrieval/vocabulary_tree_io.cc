@@ -28,14 +28,20 @@ constexpr uint32_t kFormatVersion = 1;
 constexpr size_t kHeaderBytes = 8 + 6 * sizeof(uint32_t);
 constexpr size_t kNodeBytes = 2 * sizeof(uint32_t) + kDescriptorDim * sizeof(float);
 
-uint64_t Fnv1a(const char* data, size_t size) {
-  uint64_t hash = 0xcbf29ce484222325ull;
-  for (size_t i = 0; i < size; ++i) {
-    hash ^= static_cast<uint8_t>(data[i]);
-    hash *= 0x100000001b3ull;
+// FNV-1a over everything written or read, in one pass.
+class Fnv1a {
+ public:
+  void Add(const char* data, size_t size) {
+    for (size_t i = 0; i < size; ++i) {
+      hash_ ^= static_cast<uint8_t>(data[i]);
+      hash_ *= 0x100000001b3ull;
+    }
   }
-  return hash;
-}
+  uint64_t Value() const { return hash_; }
+
+ private:
+  uint64_t hash_ = 0xcbf29ce484222325ull;
+};
 
 template <typename T>
 T ToLittleEndian(T value) {
@@ -48,97 +54,135 @@ T ToLittleEndian(T value) {
   return value;
 }
 
-template <typename T>
-void Append(std::string& out, T value) {
-  static_assert(std::is_integral_v<T>);
-  value = ToLittleEndian(value);
-  out.append(reinterpret_cast<const char*>(&value), sizeof(T));
-}
+// Buffered little-endian writer that hashes what it writes.
+class Writer {
+ public:
+  explicit Writer(std::ofstream& out) : out_(out) {}
+  template <typename T>
+  void Put(T value) {
+    value = ToLittleEndian(value);
+    buffer_.append(reinterpret_cast<const char*>(&value), sizeof(T));
+    if (buffer_.size() >= (1 << 20)) Flush();
+  }
+  void Flush() {
+    hash_.Add(buffer_.data(), buffer_.size());
+    out_.write(buffer_.data(), static_cast<std::streamsize>(buffer_.size()));
+    buffer_.clear();
+  }
+  uint64_t Hash() const { return hash_.Value(); }
 
-template <typename T>
-T Extract(const std::string& in, size_t& pos) {
-  static_assert(std::is_integral_v<T>);
-  T value;
-  std::memcpy(&value, in.data() + pos, sizeof(T));
-  pos += sizeof(T);
-  return ToLittleEndian(value);
-}
+ private:
+  std::ofstream& out_;
+  std::string buffer_;
+  Fnv1a hash_;
+};
+
+// Little-endian reader of a file whose size was checked beforehand; hashes what it reads.
+class Reader {
+ public:
+  explicit Reader(std::ifstream& in) : in_(in) {}
+  template <typename T>
+  T Get() {
+    T value;
+    in_.read(reinterpret_cast<char*>(&value), sizeof(T));
+    hash_.Add(reinterpret_cast<const char*>(&value), sizeof(T));
+    return ToLittleEndian(value);
+  }
+  // Reads n values of T into out, hashing them.
+  template <typename T>
+  void GetArray(T* out, size_t n) {
+    in_.read(reinterpret_cast<char*>(out), static_cast<std::streamsize>(n * sizeof(T)));
+    hash_.Add(reinterpret_cast<const char*>(out), n * sizeof(T));
+    for (size_t i = 0; i < n; ++i) out[i] = ToLittleEndian(out[i]);
+  }
+  bool Good() const { return static_cast<bool>(in_); }
+  uint64_t Hash() const { return hash_.Value(); }
+
+ private:
+  std::ifstream& in_;
+  Fnv1a hash_;
+};
 
 }  // namespace
 
 void VocabularyTree::Save(const std::filesystem::path& path) const {
   LOOPSFM_CHECK_MSG(!Empty(), "saving an empty vocabulary tree");
-  std::string bytes(kMagic);
-  bytes.reserve(kHeaderBytes + nodes_.size() * kNodeBytes + sizeof(uint64_t));
-  Append<uint32_t>(bytes, kFormatVersion);
-  Append<uint32_t>(bytes, kDescriptorDim);
-  Append<uint32_t>(bytes, static_cast<uint32_t>(branching_));
-  Append<uint32_t>(bytes, static_cast<uint32_t>(depth_));
-  Append<uint32_t>(bytes, static_cast<uint32_t>(nodes_.size()));
-  Append<uint32_t>(bytes, static_cast<uint32_t>(num_words_));
-  for (const Node& node : nodes_) {
-    Append<uint32_t>(bytes, node.first_child);
-    Append<uint32_t>(bytes, node.num_children);
-  }
-  for (int64_t i = 0; i < centres_.size(); ++i) {
-    Append<uint32_t>(bytes, std::bit_cast<uint32_t>(centres_.data()[i]));
-  }
-  Append<uint64_t>(bytes, Fnv1a(bytes.data(), bytes.size()));
-
   // Written beside the target and renamed, so a failed write never leaves half a tree.
   std::filesystem::path temp = path;
   temp += ".partial";
   {
     std::ofstream out(temp, std::ios::binary | std::ios::trunc);
-    out.write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
+    Writer writer(out);
+    for (const char c : kMagic) writer.Put(c);
+    writer.Put<uint32_t>(kFormatVersion);
+    writer.Put<uint32_t>(kDescriptorDim);
+    writer.Put<uint32_t>(static_cast<uint32_t>(branching_));
+    writer.Put<uint32_t>(static_cast<uint32_t>(depth_));
+    writer.Put<uint32_t>(static_cast<uint32_t>(nodes_.size()));
+    writer.Put<uint32_t>(static_cast<uint32_t>(num_words_));
+    for (const Node& node : nodes_) {
+      writer.Put<uint32_t>(node.first_child);
+      writer.Put<uint32_t>(node.num_children);
+    }
+    for (const float value : centres_) writer.Put<float>(value);
+    writer.Flush();
+    const uint64_t hash = ToLittleEndian(writer.Hash());
+    out.write(reinterpret_cast<const char*>(&hash), sizeof(hash));
     out.close();
     if (!out) {
       std::error_code ignored;
       std::filesystem::remove(temp, ignored);
-      throw StorageError(fmt::format("cannot write vocabulary tree '{}': check that the folder "
-                                     "exists and is writable",
-                                     path.string()));
+      throw StorageError(
+          fmt::format("cannot write vocabulary tree '{}': check that the folder "
+                      "exists and is writable",
+                      path.string()));
     }
   }
   std::error_code ec;
   std::filesystem::rename(temp, path, ec);
   if (ec) {
     std::filesystem::remove(temp, ec);
-    throw StorageError(fmt::format("cannot write vocabulary tree '{}': {}", path.string(),
-                                   ec.message()));
+    throw StorageError(
+        fmt::format("cannot write vocabulary tree '{}': {}", path.string(), ec.message()));
   }
 }
 
 VocabularyTree VocabularyTree::Load(const std::filesystem::path& path) {
   const std::string where = fmt::format("vocabulary tree '{}'", path.string());
-  std::ifstream in(path, std::ios::binary);
   std::error_code ec;
   const bool is_file = std::filesystem::is_regular_file(path, ec);
-  if (!in || !is_file) {
-    throw InputError(fmt::format("cannot read {}: no such file (build one with `loopsfm vocab "
-                                 "build`, or leave out --vocab to train on the scene)",
-                                 where));
+  const uint64_t size = is_file ? std::filesystem::file_size(path, ec) : 0;
+  std::ifstream in(path, std::ios::binary);
+  if (!is_file || ec || !in) {
+    throw InputError(
+        fmt::format("cannot read {}: no such file (build one with `loopsfm vocab "
+                    "build`, or leave out --vocab to train on the scene)",
+                    where));
   }
-  std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-  if (bytes.size() < kMagic.size() || std::string_view(bytes).substr(0, 8) != kMagic) {
-    throw InputError(fmt::format("{} is not a loopsfm vocabulary tree file (no '{}' header)",
-                                 where, kMagic));
+  Reader reader(in);
+  char magic[8] = {};
+  if (size >= kMagic.size()) {
+    for (char& c : magic) c = reader.Get<char>();
   }
-  if (bytes.size() < kHeaderBytes) {
-    throw InputError(fmt::format("{} is truncated: {} bytes, shorter than its header", where,
-                                 bytes.size()));
+  if (!reader.Good() || std::string_view(magic, 8) != kMagic) {
+    throw InputError(
+        fmt::format("{} is not a loopsfm vocabulary tree file (no '{}' header)", where, kMagic));
   }
-  size_t pos = kMagic.size();
-  const uint32_t version = Extract<uint32_t>(bytes, pos);
-  const uint32_t dim = Extract<uint32_t>(bytes, pos);
-  const uint32_t branching = Extract<uint32_t>(bytes, pos);
-  const uint32_t depth = Extract<uint32_t>(bytes, pos);
-  const uint32_t num_nodes = Extract<uint32_t>(bytes, pos);
-  const uint32_t num_words = Extract<uint32_t>(bytes, pos);
+  if (size < kHeaderBytes) {
+    throw InputError(
+        fmt::format("{} is truncated: {} bytes, shorter than its header", where, size));
+  }
+  const uint32_t version = reader.Get<uint32_t>();
+  const uint32_t dim = reader.Get<uint32_t>();
+  const uint32_t branching = reader.Get<uint32_t>();
+  const uint32_t depth = reader.Get<uint32_t>();
+  const uint32_t num_nodes = reader.Get<uint32_t>();
+  const uint32_t num_words = reader.Get<uint32_t>();
   if (version != kFormatVersion) {
-    throw InputError(fmt::format("{} has format version {}, this build reads version {}: "
-                                 "rebuild it with `loopsfm vocab build`",
-                                 where, version, kFormatVersion));
+    throw InputError(
+        fmt::format("{} has format version {}, this build reads version {}: "
+                    "rebuild it with `loopsfm vocab build`",
+                    where, version, kFormatVersion));
   }
   if (dim != kDescriptorDim) {
     throw InputError(fmt::format("{} holds {}-dimensional descriptors, expected {} (SIFT)", where,
@@ -146,33 +190,36 @@ VocabularyTree VocabularyTree::Load(const std::filesystem::path& path) {
   }
   if (num_nodes == 0) throw InputError(fmt::format("{} is corrupt: it has no nodes", where));
   const uint64_t expected = kHeaderBytes + uint64_t{num_nodes} * kNodeBytes + sizeof(uint64_t);
-  if (bytes.size() < expected) {
-    throw InputError(fmt::format("{} is truncated: {} bytes, expected {} for {} nodes", where,
-                                 bytes.size(), expected, num_nodes));
+  if (size < expected) {
+    throw InputError(fmt::format("{} is truncated: {} bytes, expected {} for {} nodes", where, size,
+                                 expected, num_nodes));
   }
-  if (bytes.size() > expected) {
-    throw InputError(fmt::format("{} is corrupt: {} unexpected bytes after the tree", where,
-                                 bytes.size() - expected));
-  }
-  size_t checksum_pos = expected - sizeof(uint64_t);
-  if (Extract<uint64_t>(bytes, checksum_pos) != Fnv1a(bytes.data(), expected - sizeof(uint64_t))) {
-    throw InputError(fmt::format("{} is corrupt: its checksum does not match its contents", where));
+  if (size > expected) {
+    throw InputError(
+        fmt::format("{} is corrupt: {} unexpected bytes after the tree", where, size - expected));
   }
 
   VocabularyTree tree;
   tree.branching_ = static_cast<int>(branching);
   tree.depth_ = static_cast<int>(depth);
+  std::vector<uint32_t> links(2 * size_t{num_nodes});
+  reader.GetArray(links.data(), links.size());
   tree.nodes_.resize(num_nodes);
-  for (Node& node : tree.nodes_) {
-    node.first_child = Extract<uint32_t>(bytes, pos);
-    node.num_children = Extract<uint32_t>(bytes, pos);
+  for (size_t i = 0; i < tree.nodes_.size(); ++i) {
+    tree.nodes_[i] = {links[2 * i], links[2 * i + 1]};
   }
-  tree.centres_.resize(num_nodes, kDescriptorDim);
-  for (int64_t i = 0; i < tree.centres_.size(); ++i) {
-    tree.centres_.data()[i] = std::bit_cast<float>(Extract<uint32_t>(bytes, pos));
+  tree.centres_.resize(size_t{num_nodes} * kDescriptorDim);
+  reader.GetArray(tree.centres_.data(), tree.centres_.size());
+  const uint64_t hash = reader.Hash();
+  const uint64_t stored = reader.Get<uint64_t>();
+  if (!reader.Good()) throw InputError(fmt::format("{} could not be read to its end", where));
+  if (stored != hash) {
+    throw InputError(fmt::format("{} is corrupt: its checksum does not match its contents", where));
   }
-  if (!tree.centres_.allFinite()) {
-    throw InputError(fmt::format("{} is corrupt: it has non-finite centres", where));
+  for (const float value : tree.centres_) {
+    if (!std::isfinite(value)) {
+      throw InputError(fmt::format("{} is corrupt: it has non-finite centres", where));
+    }
   }
   if (!tree.Finish() || static_cast<uint32_t>(tree.num_words_) != num_words) {
     throw InputError(fmt::format("{} is corrupt: its nodes do not form a tree", where));

@@ -1,12 +1,11 @@
 #include "loopsfm/retrieval/vocabulary_tree.h"
 
-#include <gtest/gtest.h>
-
 #include <filesystem>
 #include <fstream>
 #include <map>
 #include <set>
 
+#include <gtest/gtest.h>
 #include <tbb/global_control.h>
 
 #include "loopsfm/retrieval/retrieval_test_data.h"
@@ -104,7 +103,15 @@ TEST_F(VocabularyTreeTest, QuantizeAllMatchesQuantize) {
     for (int d = 0; d < kDescriptorDim; ++d) descriptors(i, d) = random.UniformInt(0, 255);
   }
   const std::vector<uint32_t> words = tree_->QuantizeAll(descriptors);
+  ASSERT_EQ(words.size(), 300u);
   for (int i = 0; i < 300; ++i) EXPECT_EQ(words[i], tree_->Quantize(descriptors.row(i).data()));
+  // Several sets in one descent, empty ones included.
+  const FeatureDescriptors empty(0, kDescriptorDim);
+  const auto sets = tree_->QuantizeAll({&data_->points, &empty, &descriptors});
+  ASSERT_EQ(sets.size(), 3u);
+  EXPECT_EQ(sets[0], tree_->QuantizeAll(data_->points));
+  EXPECT_TRUE(sets[1].empty());
+  EXPECT_EQ(sets[2], words);
 }
 
 TEST_F(VocabularyTreeTest, SaveLoadRoundTripQuantisesIdentically) {
@@ -224,9 +231,9 @@ TEST(VocabularyTree, RejectsBadOptionsAndNoData) {
   options.max_training_descriptors = 1;
   EXPECT_THROW(options.Check(), InvalidArgument);
   Random random;
-  EXPECT_THROW(VocabularyTree::Train(FeatureDescriptors(0, kDescriptorDim), VocabTreeOptions(),
-                                     random),
-               InvalidArgument);
+  EXPECT_THROW(
+      VocabularyTree::Train(FeatureDescriptors(0, kDescriptorDim), VocabTreeOptions(), random),
+      InvalidArgument);
 }
 
 }  // namespace

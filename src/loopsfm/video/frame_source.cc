@@ -39,8 +39,18 @@ class VideoSource : public FrameSource {
 
   std::optional<RawFrame> Next() override {
     RawFrame frame;
-    if (!capture_.read(frame.image) || frame.image.empty()) return End();
+    // A damaged packet fails one read; the decoder may still hold frames after it, so a few
+    // more reads are tried before the video counts as ended.
+    bool ok = false;
+    for (int attempt = 0; attempt < kMaxFailedReads && !ok; ++attempt) {
+      ok = capture_.read(frame.image) && !frame.image.empty();
+    }
+    if (!ok) return End();
     if (frame.image.channels() == 1) cv::cvtColor(frame.image, frame.image, cv::COLOR_GRAY2BGR);
+    // The decoder's position (from timestamps) names the frame, so a frame lost to damage
+    // does not shift the names of the frames after it.
+    const int position = static_cast<int>(capture_.get(cv::CAP_PROP_POS_FRAMES)) - 1;
+    if (position >= next_index_) next_index_ = position;
     frame.source_index = next_index_++;
     frame.name = VideoFrameName(frame.source_index);
     return frame;
@@ -71,6 +81,7 @@ class VideoSource : public FrameSource {
     return std::nullopt;
   }
 
+  static constexpr int kMaxFailedReads = 8;
   cv::VideoCapture capture_;
   int next_index_ = 0;
   bool warned_ = false;
