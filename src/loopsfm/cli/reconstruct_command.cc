@@ -23,6 +23,11 @@ void PrintSummary(const ReconstructReport& report) {
   for (const StageTime& t : report.stage_times) {
     out += fmt::format("{:<28}{:.1f} s\n", "time " + t.stage, t.seconds);
   }
+  const MapperReport& m = report.mapper;
+  out += fmt::format("{:<28}registration {:.1f} s, triangulation {:.1f} s, {} local BA {:.1f} s, "
+                     "{} global BA {:.1f} s\n",
+                     "  of which", m.seconds_registration, m.seconds_triangulation, m.num_local_ba,
+                     m.seconds_local_ba, m.num_global_ba, m.seconds_global_ba);
   out += fmt::format("{:<28}{:.1f} s, peak memory {:.0f} MiB\n", "total", report.total_seconds,
                      report.peak_memory_bytes / 1048576.0);
   std::fputs(out.c_str(), stdout);

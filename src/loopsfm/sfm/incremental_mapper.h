@@ -34,7 +34,7 @@ struct IncrementalMapperOptions {
   // Local bundle adjustment: the new frame and this many frames sharing most points with it.
   int local_ba_num_images = 6;
   // Global bundle adjustment when the registered frame count has grown by this fraction.
-  double global_ba_growth = 0.1;
+  double global_ba_growth = 0.25;
   // Refine focal lengths of cameras whose intrinsics were guessed (no prior focal length).
   bool refine_guessed_focal_length = true;
   // Refine distortion parameters too (OPENCV, SIMPLE_RADIAL, RADIAL cameras).
