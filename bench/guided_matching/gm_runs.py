@@ -237,9 +237,23 @@ def read_verified(db):
 # Matching runs
 
 
-def match_run(args, set_dir, variant_db, variant, strategy, extra, run_index, tag=""):
+def mark_pairs_matched(db, pairs):
+    """Stores empty matches for the given (k, l) variant pairs, so loopsfm skips them (resume)."""
+    conn = sqlite3.connect(db)
+    try:
+        conn.executemany("INSERT INTO matches(pair_id, rows, cols, data) VALUES (?, 0, 2, NULL)",
+                         (((k + 1) * PAIR_ID_BASE + (l + 1),) for k, l in pairs))
+        conn.commit()
+    finally:
+        conn.close()
+
+
+def match_run(args, set_dir, variant_db, variant, strategy, extra, run_index, tag="",
+              skip_pairs=None):
     """One `loopsfm match` on a fresh copy of the variant database; cached in the workdir.
 
+    skip_pairs: (k, l) pairs stored as already matched before the run, which loopsfm then
+    skips (used to time exhaustive matching of exhaustive's verified pairs only).
     Returns {report, verified, load_before, wall_s, cmd}; report is loopsfm's --json-report.
     """
     label = f"{strategy}{'-' + tag if tag else ''}-{run_index}"
@@ -257,6 +271,8 @@ def match_run(args, set_dir, variant_db, variant, strategy, extra, run_index, ta
     run_dir.mkdir(parents=True)
     db = run_dir / "run.db"
     shutil.copyfile(variant_db, db)
+    if skip_pairs:
+        mark_pairs_matched(db, skip_pairs)
     report_path = run_dir / "report.json"
     cmd = [args.loopsfm] + (["--threads", args.threads] if args.threads else [])
     cmd += ["match", "-d", db, "--pairs", strategy, "--json-report", report_path] + list(extra)

@@ -64,10 +64,10 @@ VocabularyTree BuildVocabulary(const std::vector<std::filesystem::path>& inputs,
   }
   std::vector<const FeatureDescriptors*> sets;
   for (const auto& d : per_frame) sets.push_back(&d);
-  const FeatureDescriptors training =
+  FeatureDescriptors training =
       SampleDescriptors(sets, options.tree.max_training_descriptors, random);
   local.num_training_descriptors = training.rows();
-  VocabularyTree tree = VocabularyTree::Train(training, options.tree, random);
+  VocabularyTree tree = VocabularyTree::Train(std::move(training), options.tree, random);
   local.num_words = tree.NumWords();
   local.seconds = timer.ElapsedSeconds();
   if (report) *report = local;

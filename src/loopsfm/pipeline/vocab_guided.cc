@@ -41,7 +41,7 @@ VocabularyTree TrainSceneTree(const Database& database, const std::vector<image_
     training.middleRows(row, sample.rows()) = sample;
     row += sample.rows();
   }
-  return VocabularyTree::Train(training, options, random);
+  return VocabularyTree::Train(std::move(training), options, random);
 }
 
 // A colour-mapped picture of a matrix, normalised to its largest value.
@@ -105,7 +105,18 @@ void MatchVocabTreeGuided(Database& database, const std::vector<image_t>& ordere
 
   timer.Restart();
   ImageDatabase images(tree.NumWords());
-  for (image_t id : ordered_ids) images.AddImage(id, tree.QuantizeAll(database.ReadDescriptors(id)));
+  // Batches of frames go down the tree together (each node's centres are read once per
+  // batch); the batch bounds the descriptors held in memory.
+  constexpr size_t kBatch = 16;
+  for (size_t begin = 0; begin < ordered_ids.size(); begin += kBatch) {
+    const size_t end = std::min(ordered_ids.size(), begin + kBatch);
+    std::vector<FeatureDescriptors> batch;
+    for (size_t i = begin; i < end; ++i) batch.push_back(database.ReadDescriptors(ordered_ids[i]));
+    std::vector<const FeatureDescriptors*> pointers;
+    for (const auto& d : batch) pointers.push_back(&d);
+    const auto words = tree.QuantizeAll(pointers);
+    for (size_t i = begin; i < end; ++i) images.AddImage(ordered_ids[i], words[i - begin]);
+  }
   images.Finalize();
   const Eigen::MatrixXf scores = images.SimilarityMatrix();
   report->vocab.score_seconds = timer.ElapsedSeconds();

@@ -57,10 +57,10 @@ inline float SquaredNorm128(const float* a) { return Dot128(a, a); }
 
 // Index of the centre nearest to x among `num` consecutive centre rows, by |c|^2 - 2 x.c
 // (|x|^2 is common to all; squared_norms from SquaredNorm128); ties go to the lower index.
-// Fixed-size Eigen expressions: the summation order does not depend on memory alignment. Shared by
-// training and quantisation, so that both send a descriptor to the same centre. (Measured: a
-// transposed layout with 16 centres per vector register was 1.5-2.5x slower than these independent
-// dot products.)
+// Shared by training and quantisation, so that both send a descriptor to the same centre.
+// Fixed-size Eigen expressions: the summation order does not depend on memory alignment.
+// (Measured: a transposed layout with 16 centres per vector register was 1.5-2.5x slower
+// than these independent dot products.)
 inline int NearestCentre(const float* x, const float* centres, const float* squared_norms,
                          int num) {
   int best = 0;
