@@ -17,6 +17,17 @@ def fmt(value, digits=1, percent=False):
     return f"{value:.{digits}f}"
 
 
+SLOW = 1.3  # a run whose median matching time per pair is this much above the truth run's
+
+
+def timed(row, key, digits=1):
+    """A time with a dagger when the run was slowed by other jobs (see README)."""
+    value = row.get(f"{key}_s")
+    slowdown = row.get(f"{key}_slowdown")
+    mark = " †" if slowdown is not None and slowdown > SLOW else ""
+    return fmt(value, digits) + mark
+
+
 def markdown_table(header, rows):
     lines = ["| " + " | ".join(header) + " |", "|" + "|".join("---" for _ in header) + "|"]
     lines += ["| " + " | ".join(str(c) for c in row) + " |" for row in rows]
@@ -30,9 +41,9 @@ def sweep_table(rows):
               "vocab inlier-weighted recall"]
     body = []
     for r in rows:
-        ex = fmt(r["exhaustive_s"]) + ("" if r["exhaustive_measured"] else " (est.)")
+        ex = timed(r, "exhaustive") + ("" if r["exhaustive_measured"] else " (est.)")
         body.append([r["set"], r["variant"], r["frames"], r["repeats"], r["stride"], r["span"],
-                     fmt(r["density"], 1, True), ex, fmt(r["lowres_s"]), fmt(r["vocab_s"]),
+                     fmt(r["density"], 1, True), ex, timed(r, "lowres"), timed(r, "vocab"),
                      fmt(r["optimum_s"]), fmt(r["vocab_over_optimum"], 2),
                      fmt(r["exhaustive_over_vocab"], 1), fmt(r["lowres_over_vocab"], 2),
                      fmt(r["vocab"]["pair_recall"], 1, True),
@@ -49,7 +60,7 @@ def breakdown_table(rows):
     body = []
     for r in rows:
         b = r["breakdown"]
-        body.append([r["set"], r["variant"], r["frames"], fmt(r["vocab_s"]),
+        body.append([r["set"], r["variant"], r["frames"], timed(r, "vocab"),
                      fmt(b["build_s"]), fmt(b["score_s"]), fmt(b["propose_s"], 2),
                      fmt(b["match_s"]), fmt(b["match_sequential_s"]), fmt(b["other_s"], 2),
                      b["rounds"], b["pairs_sequential"],
@@ -73,8 +84,8 @@ def recall_table(rows, target_frames):
                      fmt(v["pair_recall"], 1, True), fmt(v["far_recall"], 1, True),
                      v["loop_found"], fmt(v["weighted_recall"], 2, True),
                      fmt(v["inlier_recall"], 2, True), fmt(lo["pair_recall"], 1, True),
-                     fmt(lo["weighted_recall"], 2, True), fmt(r["exhaustive_s"]),
-                     fmt(r["lowres_s"]), fmt(r["vocab_s"]), fmt(r["optimum_s"]),
+                     fmt(lo["weighted_recall"], 2, True), timed(r, "exhaustive"),
+                     timed(r, "lowres"), timed(r, "vocab"), fmt(r["optimum_s"]),
                      fmt(r["vocab_over_optimum"], 2), fmt(r["optimum_measured_s"]),
                      fmt(r["vocab_over_measured_optimum"], 2), targets_text(r, target_frames)])
     return markdown_table(header, body)
@@ -97,7 +108,7 @@ def settings_table(rows):
     body = []
     for r in rows:
         b, v = r["breakdown"], r["vocab"]
-        body.append([r["set"], r["frames"], f"`{r['flags'] or '(defaults)'}`", fmt(r["vocab_s"]),
+        body.append([r["set"], r["frames"], f"`{r['flags'] or '(defaults)'}`", timed(r, "vocab"),
                      fmt(r["optimum_s"]), fmt(r["vocab_over_optimum"], 2),
                      fmt(r["vocab_over_measured_optimum"], 2), fmt(b["build_s"]),
                      fmt(b["score_s"]), b["rounds"], b["pairs_matched"],

@@ -23,6 +23,32 @@ def log(message):
     print(message, file=sys.stderr, flush=True)
 
 
+def busy_cpus(seconds=3.0):
+    """Mean number of other runnable tasks over a few seconds (/proc/loadavg's running count,
+    less this process), or None where /proc is not there."""
+    samples = []
+    end = time.monotonic() + seconds
+    while time.monotonic() < end:
+        try:
+            running = int(Path("/proc/loadavg").read_text().split()[3].split("/")[0])
+        except (OSError, ValueError, IndexError):
+            return None
+        samples.append(max(0, running - 1))
+        time.sleep(0.2)
+    return sum(samples) / len(samples)
+
+
+def wait_until_idle(max_busy, timeout):
+    """Waits (at most timeout seconds) until fewer than max_busy other tasks are runnable."""
+    start = time.monotonic()
+    busy = busy_cpus()
+    while busy is not None and busy >= max_busy and time.monotonic() - start < timeout:
+        log(f"    waiting: {busy:.1f} other tasks running")
+        time.sleep(20)
+        busy = busy_cpus()
+    return busy
+
+
 def load_average():
     try:
         return round(os.getloadavg()[0], 2)
@@ -276,6 +302,7 @@ def match_run(args, set_dir, variant_db, variant, strategy, extra, run_index, ta
     report_path = run_dir / "report.json"
     cmd = [args.loopsfm] + (["--threads", args.threads] if args.threads else [])
     cmd += ["match", "-d", db, "--pairs", strategy, "--json-report", report_path] + list(extra)
+    busy_before = wait_until_idle(args.max_busy, args.wait_idle) if args.wait_idle else None
     load_before = load_average()
     log(f"  {variant.name}: {strategy}{' ' + ' '.join(extra) if extra else ''} "
         f"[{variant.num_frames} frames, {variant.num_pairs} pairs, load {load_before}] ...")
@@ -288,6 +315,7 @@ def match_run(args, set_dir, variant_db, variant, strategy, extra, run_index, ta
         f"{report['num_pairs_verified']} verified")
     result = {"cmd_tail": cmd_tail, "threads": args.threads, "report": report,
               "load_before": load_before, "load_after": load_average(), "wall_s": wall,
+              "busy_before": busy_before,
               "when": time.strftime("%Y-%m-%d %H:%M:%S"),
               "verified": {f"{k},{l}": v for (k, l), v in verified.items()}}
     result_path.write_text(json.dumps(result))

@@ -63,6 +63,10 @@ def parse_args():
                    help="skip timing exhaustive on its verified pairs only (tables 4 and 5)")
     p.add_argument("--target-frames", type=int, default=300,
                    help="targets apply to sequences of at least this many frames")
+    p.add_argument("--wait-idle", type=float, default=0, metavar="S",
+                   help="before each run wait up to S seconds until fewer than --max-busy "
+                   "other tasks are runnable (for shared machines)")
+    p.add_argument("--max-busy", type=float, default=0.5)
     p.add_argument("--threads", type=int, default=0, help="loopsfm --threads (0: all cores)")
     p.add_argument("--workdir", type=Path, default=Path("/tmp/loopsfm_guided_matching"))
     p.add_argument("--out", type=Path, help="tables, JSON, figures (default WORKDIR/results)")
@@ -152,6 +156,7 @@ class SetBench:
         else:
             row["exhaustive_s"] = variant.num_pairs * (seconds_per_pair or self.seconds_per_pair)
             row["exhaustive_measured"] = False
+            row["exhaustive_match_ms"] = ex["report"]["median_match_ms"]
         row["optimum_s"] = row["exhaustive_s"] * density
         row["optimum_measured_s"] = None
         if variant is self.full and args.measured_optimum:
@@ -162,6 +167,7 @@ class SetBench:
             row["lowres_all_s"] = lo["all_seconds"]
             row["lowres"] = recall(truth, lo["verified"], args.overlap, variant)
             row["lowres_report"] = lo["report"]
+            row["lowres_match_ms"] = lo["report"]["median_match_ms"]
             row["lowres_over_vocab"] = None
         vo = median_runs([self.run(variant, "vocabtree", vocab_extra, k, tag)
                           for k in range(args.runs)])
@@ -171,6 +177,7 @@ class SetBench:
         row["vocab_load"] = vo["load_before"]
         row["vocab"] = recall(truth, vo["verified"], args.overlap, variant)
         row["vocab_report"] = rep
+        row["vocab_match_ms"] = rep["median_match_ms"]
         row["flags"] = " ".join(vocab_extra)
         row["vocab_over_optimum"] = rep["seconds"] / row["optimum_s"] if row["optimum_s"] else None
         row["exhaustive_over_vocab"] = row["exhaustive_s"] / rep["seconds"]
@@ -201,7 +208,25 @@ class SetBench:
         return row
 
 
+def mark_slowdowns(results):
+    """Median descriptor-matching time per pair is the same work in every run of a set, so
+    its ratio to the set's fastest run flags runs slowed down by other jobs (`*_slowdown`)."""
+    rows = [r for key in ("density_sweep", "frames_sweep", "recall", "settings", "breakdown")
+            for r in results[key]]
+    fastest = {}
+    for r in rows:
+        for kind in ("exhaustive", "lowres", "vocab"):
+            ms = r.get(f"{kind}_match_ms")
+            if ms:
+                fastest[r["set"]] = min(ms, fastest.get(r["set"], ms))
+    for r in rows:
+        for kind in ("exhaustive", "lowres", "vocab"):
+            ms = r.get(f"{kind}_match_ms")
+            r[f"{kind}_slowdown"] = ms / fastest[r["set"]] if ms else None
+
+
 def write_outputs(args, results, started):
+    mark_slowdowns(results)
     args.out.mkdir(parents=True, exist_ok=True)
     sections = [f"# Guided matching benchmark ({args.mode})\n",
                 f"Run {time.strftime('%Y-%m-%d %H:%M', time.localtime(started))}, "

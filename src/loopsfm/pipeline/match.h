@@ -49,7 +49,8 @@ struct MatchOptions {
   std::filesystem::path vocab_path;
   // Guided rounds: proposals per round and the stop rule.
   GuidedPairingOptions guided;
-  // Vocabtree: match sequential neighbours first (video frames are ordered).
+  // Vocabtree: match sequential neighbours first (video frames are ordered), each frame's
+  // window stopping at its first pair that fails verification.
   bool vocab_include_sequential = true;
   // Lowres: features per frame in the prefilter (largest scale first) and the matches
   // the prefilter must find for the pair to be fully matched.

@@ -78,8 +78,26 @@ void MatchVocabTreeGuided(Database& database, const std::vector<image_t>& ordere
   };
   Timer timer;
   if (options.vocab_include_sequential) {
-    const auto pairs = SequentialPairs(ordered_ids, options.sequential);
-    record(pairs, matcher.Match(pairs, report));
+    // Sequential neighbours in waves of growing frame distance: frame i is paired with i + d
+    // only while (i, i + d - 1) verified, so the window stops where frames stop overlapping
+    // (the guided rounds find whatever lies beyond).
+    const int initial_frames = options.sequential.num_initial_frames;
+    std::vector<bool> open(n, true);
+    for (int d = 1; d < n; ++d) {
+      std::vector<ImagePair> wave;
+      std::vector<int> from;
+      for (int i = 0; i + d < n; ++i) {
+        const int window =
+            i < initial_frames ? options.sequential.initial_overlap : options.sequential.overlap;
+        if (!open[i] || d > window) continue;
+        wave.emplace_back(ordered_ids[i], ordered_ids[i + d]);
+        from.push_back(i);
+      }
+      if (wave.empty()) break;
+      const std::vector<bool> ok = matcher.Match(wave, report);
+      record(wave, ok);
+      for (size_t k = 0; k < wave.size(); ++k) open[from[k]] = ok[k];
+    }
   }
   // Pairs stored by earlier runs (any strategy) count as tried.
   for (const ImagePair& pair : database.ReadAllMatchedPairs()) {
