@@ -67,6 +67,9 @@ def parse_args():
                    help="before each run wait up to S seconds until fewer than --max-busy "
                    "other tasks are runnable (for shared machines)")
     p.add_argument("--max-busy", type=float, default=0.5)
+    p.add_argument("--retime-slow", action="store_true",
+                   help="run again every cached run whose median matching time per pair is "
+                   f"more than {gm_report.SLOW} x its set's fastest (slowed by other jobs)")
     p.add_argument("--threads", type=int, default=0, help="loopsfm --threads (0: all cores)")
     p.add_argument("--workdir", type=Path, default=Path("/tmp/loopsfm_guided_matching"))
     p.add_argument("--out", type=Path, help="tables, JSON, figures (default WORKDIR/results)")
@@ -91,6 +94,23 @@ def parse_args():
     if not args.loopsfm.exists():
         sys.exit(f"{args.loopsfm} not found: build it first (scripts/build) or pass --loopsfm")
     return args
+
+
+def drop_slow_runs(workdir):
+    """Renames result.json of cached runs slowed by other jobs so that they run again."""
+    for variant_dir in sorted(workdir.glob("*/variants_*")):
+        results = []
+        for path in variant_dir.glob("runs/*/*/result.json"):
+            ms = json.loads(path.read_text())["report"].get("median_match_ms")
+            if ms:
+                results.append((ms, path))
+        if not results:
+            continue
+        fastest = min(ms for ms, _ in results)
+        for ms, path in results:
+            if ms > gm_report.SLOW * fastest:
+                log(f"retime: {path.parent} ({ms:.1f} ms per pair, fastest {fastest:.1f})")
+                path.rename(path.with_name("result.slow.json"))
 
 
 class SetBench:
@@ -258,6 +278,8 @@ def main():
     args = parse_args()
     started = time.time()
     args.workdir.mkdir(parents=True, exist_ok=True)
+    if args.retime_slow:
+        drop_slow_runs(args.workdir)
     results = {"meta": {"mode": args.mode, "started": time.ctime(started), "cpus": os.cpu_count(),
                         "load_at_start": load_average(), "runs": args.runs,
                         "street_frames": args.street_frames,

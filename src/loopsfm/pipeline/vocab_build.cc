@@ -17,17 +17,13 @@ void VocabBuildOptions::Check() const {
                          max_descriptors_per_frame);
 }
 
-namespace {
-
-FeatureDescriptors SampleRows(const FeatureDescriptors& all, int max_rows, Random& random) {
+FeatureDescriptors SampleDescriptorRows(const FeatureDescriptors& all, int max_rows, Random& random) {
   const auto rows = random.Sample(static_cast<uint32_t>(all.rows()),
                                   static_cast<uint32_t>(std::min<long>(max_rows, all.rows())));
   FeatureDescriptors sample(rows.size(), kDescriptorDim);
   for (size_t r = 0; r < rows.size(); ++r) sample.row(r) = all.row(rows[r]);
   return sample;
 }
-
-}  // namespace
 
 VocabularyTree BuildVocabulary(const std::vector<std::filesystem::path>& inputs,
                                const VocabBuildOptions& options, VocabBuildReport* report) {
@@ -46,7 +42,7 @@ VocabularyTree BuildVocabulary(const std::vector<std::filesystem::path>& inputs,
       const Database database = Database::Open(input.string());
       for (const Frame& frame : database.ReadFrames()) {
         per_frame.push_back(
-            SampleRows(database.ReadDescriptors(frame.image_id), options.max_descriptors_per_frame, random));
+            SampleDescriptorRows(database.ReadDescriptors(frame.image_id), options.max_descriptors_per_frame, random));
         ++local.num_frames;
       }
     } else {
@@ -55,7 +51,7 @@ VocabularyTree BuildVocabulary(const std::vector<std::filesystem::path>& inputs,
       keyframes.every = options.every;
       KeyframeSelector selector(*source, keyframes);
       while (auto keyframe = selector.Next()) {
-        per_frame.push_back(SampleRows(ExtractSift(keyframe->frame.image, options.sift).descriptors,
+        per_frame.push_back(SampleDescriptorRows(ExtractSift(keyframe->frame.image, options.sift).descriptors,
                                        options.max_descriptors_per_frame, random));
         ++local.num_frames;
       }

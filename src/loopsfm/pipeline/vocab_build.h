@@ -29,6 +29,9 @@ struct VocabBuildReport {
   double seconds = 0.0;
 };
 
+// Up to max_rows random rows of `all` (all of them when it has fewer), for bounded samples.
+FeatureDescriptors SampleDescriptorRows(const FeatureDescriptors& all, int max_rows, Random& random);
+
 // Inputs ending in .db are read as databases; anything else as a video or image folder.
 VocabularyTree BuildVocabulary(const std::vector<std::filesystem::path>& inputs,
                                const VocabBuildOptions& options, VocabBuildReport* report);

@@ -8,6 +8,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "loopsfm/pipeline/match.h"
+#include "loopsfm/pipeline/vocab_build.h"
 #include "loopsfm/retrieval/image_database.h"
 #include "loopsfm/util/errors.h"
 #include "loopsfm/util/logging.h"
@@ -27,11 +28,8 @@ VocabularyTree TrainSceneTree(const Database& database, const std::vector<image_
   std::vector<FeatureDescriptors> samples;
   size_t total = 0;
   for (image_t id : ids) {
-    const FeatureDescriptors all = database.ReadDescriptors(id);
-    const auto rows = random.Sample(static_cast<uint32_t>(all.rows()),
-                                    static_cast<uint32_t>(std::min<size_t>(per_frame, all.rows())));
-    FeatureDescriptors sample(rows.size(), kDescriptorDim);
-    for (size_t r = 0; r < rows.size(); ++r) sample.row(r) = all.row(rows[r]);
+    FeatureDescriptors sample = SampleDescriptorRows(database.ReadDescriptors(id),
+                                                     static_cast<int>(per_frame), random);
     total += sample.rows();
     samples.push_back(std::move(sample));
   }
