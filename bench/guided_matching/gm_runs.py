@@ -263,6 +263,21 @@ def read_verified(db):
 # Matching runs
 
 
+def binary_stamp(path):
+    """Identifies a build of loopsfm: size and modification time of the binary."""
+    st = Path(path).stat()
+    return {"size": st.st_size, "mtime": st.st_mtime}
+
+
+def same_build(cached, stamp):
+    """Whether a cached run came from the binary described by stamp. Runs cached before the
+    stamp was recorded count when they started after the binary was last written."""
+    if "binary" in cached:
+        return cached["binary"] == stamp
+    started = time.mktime(time.strptime(cached["when"], "%Y-%m-%d %H:%M:%S")) - cached["wall_s"]
+    return started > stamp["mtime"]
+
+
 def mark_pairs_matched(db, pairs):
     """Stores empty matches for the given (k, l) variant pairs, so loopsfm skips them (resume)."""
     conn = sqlite3.connect(db)
@@ -288,7 +303,8 @@ def match_run(args, set_dir, variant_db, variant, strategy, extra, run_index, ta
     cmd_tail = ["match", "--pairs", strategy] + list(extra)
     if result_path.exists() and not args.fresh:
         cached = json.loads(result_path.read_text())
-        if cached.get("cmd_tail") == cmd_tail and cached.get("threads") == args.threads:
+        if (cached.get("cmd_tail") == cmd_tail and cached.get("threads") == args.threads
+                and (strategy in args.reuse_across_builds or same_build(cached, args.stamp))):
             cached["verified"] = {tuple(map(int, k.split(","))): v
                                   for k, v in cached["verified"].items()}
             cached["cached"] = True
@@ -313,7 +329,8 @@ def match_run(args, set_dir, variant_db, variant, strategy, extra, run_index, ta
     verified = read_verified(db)
     log(f"    {report['seconds']:.1f} s, {report['num_pairs_matched']} pairs matched, "
         f"{report['num_pairs_verified']} verified")
-    result = {"cmd_tail": cmd_tail, "threads": args.threads, "report": report,
+    result = {"cmd_tail": cmd_tail, "threads": args.threads, "binary": args.stamp,
+              "report": report,
               "load_before": load_before, "load_after": load_average(), "wall_s": wall,
               "busy_before": busy_before,
               "when": time.strftime("%Y-%m-%d %H:%M:%S"),

@@ -13,6 +13,7 @@ density). Standard library only (gnuplot for the figures); see README.md beside 
 import argparse
 import json
 import os
+import subprocess
 import sys
 import time
 from pathlib import Path
@@ -20,9 +21,9 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import gm_report  # noqa: E402
-from gm_runs import (Variant, base_frames, build_variant_db, density_variant, ensure_base,  # noqa: E402
-                     load_average, log, make_set, match_run, median_runs, recall,
-                     stride_variant, variant_truth)
+from gm_runs import (base_frames, binary_stamp, build_variant_db,  # noqa: E402
+                     density_variant, ensure_base, load_average, log, make_set, match_run,
+                     median_runs, recall, stride_variant, variant_truth)
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
 ALL_SETS = ["street", "block", "templeRing", "kitti07_160", "fox"]
@@ -56,7 +57,9 @@ def parse_args():
     p.add_argument("--vocab-args", default="", help="extra flags for every vocabtree run")
     p.add_argument("--vocab-settings", default="", help="';'-separated flag sets: table 5 runs "
                    "vocabtree with each on every set's whole sequence, e.g. "
-                   "'--proposals 100;--stop-failure-ratio 0.9'")
+                   "'--proposals 100;--stop-failure-ratio 0.9' (sets: --settings-sets)")
+    p.add_argument("--settings-sets", default="street,block",
+                   help="sets of table 5 (default street,block)")
     p.add_argument("--overlap", type=int, default=10, help="vocabtree sequential overlap "
                    "(loopsfm's default 10; used for the 'pairs > overlap apart' recall)")
     p.add_argument("--no-measured-optimum", dest="measured_optimum", action="store_false",
@@ -77,6 +80,9 @@ def parse_args():
         "LOOPSFM_DATA", REPO_ROOT.parent / "shared" / "data")))
     p.add_argument("--loopsfm", type=Path, default=REPO_ROOT / "build" / "loopsfm")
     p.add_argument("--fresh", action="store_true", help="ignore cached runs in the workdir")
+    p.add_argument("--reuse-across-builds", default="exhaustive",
+                   help="strategies whose cached runs are reused after loopsfm is rebuilt "
+                   "(default: exhaustive, the ground truth; the others run again)")
     p.add_argument("--keep-dbs", action="store_true", help="keep every run's database")
     args = p.parse_args()
     mode = MODES["quick" if args.quick else "full"]
@@ -93,6 +99,8 @@ def parse_args():
     args.out = args.out or args.workdir / "results"
     if not args.loopsfm.exists():
         sys.exit(f"{args.loopsfm} not found: build it first (scripts/build) or pass --loopsfm")
+    args.stamp = binary_stamp(args.loopsfm)
+    args.reuse_across_builds = [s for s in args.reuse_across_builds.split(",") if s]
     return args
 
 
@@ -173,10 +181,10 @@ class SetBench:
             if variant is not self.full:
                 row["exhaustive_truth_check"] = recall(truth, ex["verified"], args.overlap, variant)
             row["exhaustive_load"] = ex["load_before"]
+            row["exhaustive_match_ms"] = ex["report"]["median_match_ms"]
         else:
             row["exhaustive_s"] = variant.num_pairs * (seconds_per_pair or self.seconds_per_pair)
             row["exhaustive_measured"] = False
-            row["exhaustive_match_ms"] = ex["report"]["median_match_ms"]
         row["optimum_s"] = row["exhaustive_s"] * density
         row["optimum_measured_s"] = None
         if variant is self.full and args.measured_optimum:
@@ -274,6 +282,14 @@ def write_outputs(args, results, started):
     return text
 
 
+def git_describe():
+    try:
+        return subprocess.run(["git", "-C", str(REPO_ROOT), "describe", "--always", "--dirty"],
+                              capture_output=True, text=True).stdout.strip() or None
+    except OSError:
+        return None
+
+
 def main():
     args = parse_args()
     started = time.time()
@@ -284,7 +300,9 @@ def main():
                         "load_at_start": load_average(), "runs": args.runs,
                         "street_frames": args.street_frames,
                         "density_frames": args.density_frames, "strides": args.strides,
-                        "vocab_args": args.vocab_args, "overlap": args.overlap},
+                        "vocab_args": args.vocab_args, "overlap": args.overlap,
+                        "loopsfm": str(args.loopsfm), "loopsfm_build": args.stamp,
+                        "git": git_describe()},
                "density_sweep": [], "frames_sweep": [], "breakdown": [], "recall": [],
                "settings": [], "skipped": {}}
     sets = [s for s in ALL_SETS if s in args.sets] + [s for s in args.sets if s not in ALL_SETS]
@@ -329,7 +347,7 @@ def main():
             rows.sort(key=lambda r: r["density"])
             results["density_sweep"] += rows
             results["breakdown"] += rows
-        for flags in args.vocab_settings:
+        for flags in args.vocab_settings if name in args.settings_sets.split(",") else []:
             tag = "".join(c if c.isalnum() or c in ".-" else "_" for c in flags)[:60]
             row = bench.evaluate(bench.full, True, flags.split(), tag, strategies=["vocabtree"])
             results["settings"].append(row)
