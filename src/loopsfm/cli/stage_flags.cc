@@ -46,11 +46,16 @@ void AddMatchFlags(CLI::App* cmd, MatchFlags* flags) {
   cmd->add_option("--vocab-depth", flags->options.vocab_tree.depth, "Vocabulary tree depth L")
       ->capture_default_str();
   cmd->add_option("--proposals", flags->options.guided.num_proposals,
-                  "Vocabtree: best-scoring pairs proposed per round (0: number of frames)")
+                  "Vocabtree: best-scoring pairs proposed in the first round (0: number of "
+                  "frames); later rounds propose as many as the round before verified")
       ->capture_default_str();
   cmd->add_option("--stop-failure-ratio", flags->options.guided.max_failure_ratio,
-                  "Vocabtree: stop when more than this fraction of a round's proposals fail")
+                  "Vocabtree: stop proposing by score when more than this fraction of a "
+                  "round's score proposals fail (region growing goes on while it verifies)")
       ->capture_default_str();
+  cmd->add_option("--similarity-out", flags->options.similarity_path,
+                  "Vocabtree: also write the similarity matrix as text (a line of frame names, "
+                  "then one row of scores per frame)");
   cmd->add_option("--overlap", flags->options.sequential.overlap,
                   "Sequential: match each frame with this many previous frames")
       ->capture_default_str();

@@ -107,19 +107,20 @@ struct PoseSupport {
   double median_angle_deg = 0.0;
 };
 
+// Without with_angle, only num_in_front is computed.
 PoseSupport EvaluatePose(const Rigid3d& cam2_from_cam1,
                          const std::vector<Eigen::Vector2d>& points1,
-                         const std::vector<Eigen::Vector2d>& points2) {
+                         const std::vector<Eigen::Vector2d>& points2, bool with_angle = true) {
   PoseSupport support;
   const Eigen::Matrix3d Rt = cam2_from_cam1.rotation.toRotationMatrix().transpose();
   const Eigen::Vector3d center2 = -Rt * cam2_from_cam1.translation;
   std::vector<double> angles;
-  angles.reserve(points1.size());
+  if (with_angle) angles.reserve(points1.size());
   for (size_t i = 0; i < points1.size(); ++i) {
     const Eigen::Vector3d d1 = points1[i].homogeneous();
     const Eigen::Vector3d d2 = Rt * points2[i].homogeneous();
     const double a = d1.dot(d1), b = d1.dot(d2), c = d2.dot(d2);
-    angles.push_back(std::acos(std::clamp(b / std::sqrt(a * c), -1.0, 1.0)));
+    if (with_angle) angles.push_back(std::acos(std::clamp(b / std::sqrt(a * c), -1.0, 1.0)));
     const double det = a * c - b * b;
     if (det <= 1e-12 * a * c) continue;
     const double e = d1.dot(center2), f = d2.dot(center2);
@@ -139,22 +140,34 @@ Rigid3d MakeRigid(const Eigen::Matrix3d& R, const Eigen::Vector3d& t) {
   return Rigid3d(Eigen::Quaterniond(R).normalized(), t);
 }
 
-// Relative pose from an essential matrix with OpenCV's cheirality test on normalised points.
+// Relative pose from an essential matrix: of the four decompositions (R = U W V^T or
+// U W^T V^T, t = ±u3), the one with the most matches in front of both cameras. (OpenCV's
+// recoverPose does the same but triangulates every match by an SVD per point for each
+// candidate, which made it the most expensive step of verifying a good pair.)
 Rigid3d PoseFromEssential(const Eigen::Matrix3d& E, const std::vector<Eigen::Vector2d>& points1,
                           const std::vector<Eigen::Vector2d>& points2) {
-  std::vector<cv::Point2d> cv_points1, cv_points2;
-  for (size_t i = 0; i < points1.size(); ++i) {
-    cv_points1.emplace_back(points1[i].x(), points1[i].y());
-    cv_points2.emplace_back(points2[i].x(), points2[i].y());
+  if (!E.allFinite() || E.norm() < 1e-12) return Rigid3d();  // identity, zero translation
+  const Eigen::JacobiSVD<Eigen::Matrix3d> svd(E, Eigen::ComputeFullU | Eigen::ComputeFullV);
+  Eigen::Matrix3d U = svd.matrixU(), V = svd.matrixV();
+  if (U.determinant() < 0) U = -U;
+  if (V.determinant() < 0) V = -V;
+  Eigen::Matrix3d W;
+  W << 0, -1, 0, 1, 0, 0, 0, 0, 1;
+  const Eigen::Matrix3d rotations[2] = {U * W * V.transpose(), U * W.transpose() * V.transpose()};
+  const Eigen::Vector3d t = U.col(2);
+  Rigid3d best;
+  int best_support = -1;
+  for (const Eigen::Matrix3d& R : rotations) {
+    for (const double sign : {1.0, -1.0}) {
+      const Rigid3d pose = MakeRigid(R, sign * t);
+      const int support = EvaluatePose(pose, points1, points2, /*with_angle=*/false).num_in_front;
+      if (support > best_support) {
+        best_support = support;
+        best = pose;
+      }
+    }
   }
-  cv::Mat R_cv, t_cv;
-  try {
-    cv::recoverPose(ToCv(E), cv_points1, cv_points2, cv::Mat::eye(3, 3, CV_64F), R_cv, t_cv);
-  } catch (const cv::Exception&) {
-    return Rigid3d();  // degenerate E: identity, zero translation
-  }
-  return MakeRigid(ToEigen3(R_cv),
-                   Eigen::Vector3d(t_cv.at<double>(0), t_cv.at<double>(1), t_cv.at<double>(2)));
+  return best;
 }
 
 // The entries of `points` where mask is set.

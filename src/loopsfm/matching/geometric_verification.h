@@ -15,7 +15,7 @@
 // (relative_pose_refinement.h) and E's inliers re-selected with it. Inliers of E and F are
 // both counted by Sampson error, so that the E / F comparison is fair.
 //
-// The relative pose cam2_from_cam1 (x_cam2 = R x_cam1 + t) comes from E (cv::recoverPose,
+// The relative pose cam2_from_cam1 (x_cam2 = R x_cam1 + t) comes from E (decomposition with
 // cheirality, then polished); for uncalibrated pairs from E = K2^T F K1 with the cameras'
 // guessed intrinsics, polished on F's inliers (as COLMAP, a rough pose when the guess is
 // wrong; to re-estimate an initial pair as calibrated, pass cameras with

@@ -66,8 +66,10 @@ GuidedPairingReport RunGuidedPairing(const Eigen::MatrixXf& scores,
   const int n = static_cast<int>(image_ids.size());
   LOOPSFM_CHECK(scores.rows() == n && scores.cols() == n);
   LOOPSFM_CHECK(tried->rows() == n && verified->rows() == n);
-  const int k = options.num_proposals > 0 ? options.num_proposals : n;
   GuidedPairingReport report;
+  // Score proposals of the next round: k in the first, then as many as the previous round's
+  // score proposals verified, until more than max_failure_ratio of a round's fail.
+  int num_by_score = options.num_proposals > 0 ? options.num_proposals : n;
 
   // Region growing starts from the first round's verified proposals: pairs verified before
   // (sequential neighbours) would only grow along the diagonal, which sequential matching
@@ -90,8 +92,11 @@ GuidedPairingReport RunGuidedPairing(const Eigen::MatrixXf& scores,
       const int di[4] = {-1, 1, 0, 0}, dj[4] = {0, 0, -1, 1};
       for (int d = 0; d < 4; ++d) stats.num_from_growing += propose(p.i + di[d], p.j + dj[d]);
     }
-    for (const IndexPair& p : BestUntriedPairs(scores, *tried, proposed, k)) {
-      stats.num_from_scores += propose(p.i, p.j);
+    const size_t first_from_scores = proposals.size();
+    if (num_by_score > 0) {
+      for (const IndexPair& p : BestUntriedPairs(scores, *tried, proposed, num_by_score)) {
+        stats.num_from_scores += propose(p.i, p.j);
+      }
     }
     if (proposals.empty()) break;
 
@@ -108,13 +113,16 @@ GuidedPairingReport RunGuidedPairing(const Eigen::MatrixXf& scores,
         (*verified)(p.i, p.j) = (*verified)(p.j, p.i) = true;
         last_verified.push_back(p);
         ++stats.num_verified;
+        stats.num_verified_from_scores += m >= first_from_scores;
       }
     }
     report.num_tried += proposals.size();
     report.num_verified += stats.num_verified;
     report.rounds.push_back(stats);
-    const size_t failures = proposals.size() - stats.num_verified;
-    if (failures > options.max_failure_ratio * proposals.size()) break;
+    const size_t score_failures = stats.num_from_scores - stats.num_verified_from_scores;
+    const bool scores_exhausted =
+        stats.num_from_scores == 0 || score_failures > options.max_failure_ratio * stats.num_from_scores;
+    num_by_score = scores_exhausted ? 0 : static_cast<int>(stats.num_verified_from_scores);
   }
   return report;
 }

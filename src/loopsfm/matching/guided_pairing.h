@@ -1,15 +1,20 @@
 #pragma once
 // Vocabulary-tree guided pair selection with region growing.
 //
-// Each round proposes (a) the `num_proposals` highest-scoring pairs of the similarity matrix
-// not tried yet, and (b) the horizontal and vertical neighbours in the match matrix, (i±1, j)
-// and (i, j±1), of every pair verified in the previous round (video frames that see the
-// same place come in runs, so a verified pair's neighbours are likely to verify too). The
-// caller matches and verifies the proposals; the rounds stop when more than
-// max_failure_ratio of a round's proposals fail verification (most proposals fail), or when
-// nothing is left to propose. The threshold is a fraction of all of the round's proposals,
-// not of k alone, so a round whose region growing still succeeds goes on even when its
-// score-based proposals mostly fail.
+// Each round proposes (a) the highest-scoring pairs of the similarity matrix not tried yet, and
+// (b) the horizontal and vertical neighbours in the match matrix, (i±1, j) and (i, j±1), of
+// every pair verified in the previous round (video frames that see the same place come in
+// runs, so a verified pair's neighbours are likely to verify too). The caller matches and
+// verifies the proposals.
+//
+// The first round proposes k pairs by score; each later round proposes by score as many as
+// the previous round's score proposals verified, and none any more once more than
+// max_failure_ratio of a round's score proposals failed (the similarity matrix has nothing
+// left to offer). Region growing goes on as long as it verifies pairs; the rounds end when
+// nothing is proposed. Measured on a 400-frame street with one loop against exhaustive
+// matching (bench/guided_matching/policy_sim.py): a fixed k with the stop rule applied to all
+// of a round's proposals matched 16248 pairs for 96.5 % of exhaustive's 12734 verified pairs;
+// this rule matches 13796 for 99.7 %.
 
 #include <functional>
 #include <vector>
@@ -21,9 +26,10 @@
 namespace loopsfm {
 
 struct GuidedPairingOptions {
-  // Highest-scoring untried pairs proposed per round (k); 0 means the number of frames.
+  // Highest-scoring untried pairs proposed in the first round (k); 0 means the number of
+  // frames. Later rounds propose as many as the previous round's score proposals verified.
   int num_proposals = 0;
-  // Stop when more than this fraction of a round's proposals fail verification.
+  // Stop proposing by score when more than this fraction of a round's score proposals fail.
   double max_failure_ratio = 0.7;
   // Safety bound on the number of rounds.
   int max_rounds = 1000;
@@ -34,6 +40,8 @@ struct GuidedPairingRound {
   size_t num_from_scores = 0;
   size_t num_from_growing = 0;
   size_t num_verified = 0;
+  // Of num_verified, those proposed by score (the rest came from region growing).
+  size_t num_verified_from_scores = 0;
   size_t NumProposed() const { return num_from_scores + num_from_growing; }
 };
 

@@ -65,9 +65,25 @@ TEST(GuidedPairing, RegionGrowingCoversTheLoopBlockAndStops) {
   EXPECT_LT(report.num_tried, 600u);
   EXPECT_EQ(report.rounds.size(), calls);
   EXPECT_GE(report.rounds.size(), 2u);
-  // The last round failed for most of its proposals.
-  const auto& last = report.rounds.back();
-  EXPECT_GT(last.NumProposed() - last.num_verified, 0.7 * last.NumProposed());
+  // Proposals by score went on until a round's mostly failed; after that round, none.
+  size_t last_scoring = 0;
+  for (size_t r = 0; r < report.rounds.size(); ++r) {
+    if (report.rounds[r].num_from_scores > 0) last_scoring = r;
+  }
+  const auto& last = report.rounds[last_scoring];
+  EXPECT_GT(last.num_from_scores - last.num_verified_from_scores, 0.7 * last.num_from_scores);
+  // Later rounds propose by score only as many pairs as the round before verified by score.
+  for (size_t r = 1; r <= last_scoring; ++r) {
+    EXPECT_LE(report.rounds[r].num_from_scores, report.rounds[r - 1].num_verified_from_scores);
+  }
+  // Region growing ran dry: every neighbour of a verified loop pair was tried.
+  for (int a = 0; a < 10; ++a) {
+    for (int b = 90; b < n; ++b) {
+      if (!verified(a, b)) continue;
+      EXPECT_TRUE(tried(a + 1, b) && tried(a, b - 1) && tried(a, std::min(b + 1, n - 1)))
+          << a << ", " << b;
+    }
+  }
   EXPECT_GT(report.rounds[1].num_from_growing, 0u);
   // Nothing is tried twice: tried pairs = sequential + proposals.
   EXPECT_EQ(static_cast<size_t>(tried.count() / 2), 197u + report.num_tried);

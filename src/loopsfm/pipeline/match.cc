@@ -190,7 +190,8 @@ nlohmann::json ToJson(const MatchReport& r) {
   for (const auto& round : r.vocab.guided.rounds) {
     rounds.push_back({{"from_scores", round.num_from_scores},
                       {"from_growing", round.num_from_growing},
-                      {"verified", round.num_verified}});
+                      {"verified", round.num_verified},
+                      {"verified_from_scores", round.num_verified_from_scores}});
   }
   return {{"num_pairs", r.num_pairs},
           {"num_pairs_resumed", r.num_pairs_resumed},

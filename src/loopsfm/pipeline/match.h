@@ -58,6 +58,8 @@ struct MatchOptions {
   int lowres_min_matches = 12;
   // Vocabtree: write the similarity and match matrices as PNG next to the database.
   bool write_matrix_images = true;
+  // Vocabtree: also write the similarity matrix as text here (empty: not written).
+  std::filesystem::path similarity_path;
   // Worker threads (0: all cores).
   int num_threads = 0;
   // Pairs processed per batch (bounds the descriptors held in memory).

@@ -2,6 +2,7 @@
 // by the vocabulary tree's similarity matrix and grown around verified pairs.
 
 #include <filesystem>
+#include <fstream>
 
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
@@ -57,6 +58,19 @@ void WriteMatrixPng(const Eigen::MatrixXf& matrix, const std::filesystem::path& 
   cv::Mat colour;
   cv::applyColorMap(grey, colour, cv::COLORMAP_VIRIDIS);
   if (!cv::imwrite(path.string(), colour)) spdlog::warn("could not write {}", path.string());
+}
+
+// The similarity matrix as text: a line of frame names, then one row of scores per frame.
+void WriteSimilarityText(const Eigen::MatrixXf& scores, const std::vector<Frame>& frames,
+                         const std::filesystem::path& path) {
+  std::ofstream out(path);
+  for (size_t i = 0; i < frames.size(); ++i) out << (i ? " " : "") << frames[i].name;
+  out << "\n";
+  for (Eigen::Index i = 0; i < scores.rows(); ++i) {
+    for (Eigen::Index j = 0; j < scores.cols(); ++j) out << (j ? " " : "") << scores(i, j);
+    out << "\n";
+  }
+  if (!out) throw StorageError(fmt::format("cannot write the similarity matrix to '{}'", path.string()));
 }
 
 }  // namespace
@@ -136,6 +150,9 @@ void MatchVocabTreeGuided(Database& database, const std::vector<image_t>& ordere
   images.Finalize();
   const Eigen::MatrixXf scores = images.SimilarityMatrix();
   report->vocab.score_seconds = timer.ElapsedSeconds();
+  if (!options.similarity_path.empty()) {
+    WriteSimilarityText(scores, FramesInCaptureOrder(database), options.similarity_path);
+  }
   spdlog::info("vocabtree: {} words, {:.1f} s tree, {:.1f} s scoring", tree.NumWords(),
                report->vocab.build_seconds, report->vocab.score_seconds);
 
@@ -152,9 +169,9 @@ void MatchVocabTreeGuided(Database& database, const std::vector<image_t>& ordere
   report->vocab.propose_seconds = rounds_timer.ElapsedSeconds() - match_seconds;
   for (size_t r = 0; r < report->vocab.guided.rounds.size(); ++r) {
     const auto& round = report->vocab.guided.rounds[r];
-    spdlog::info("vocabtree round {}: {} proposed ({} by score, {} by region growing), {} verified",
-                 r + 1, round.NumProposed(), round.num_from_scores, round.num_from_growing,
-                 round.num_verified);
+    spdlog::info("vocabtree round {}: {} by score ({} verified), {} by region growing ({} verified)",
+                 r + 1, round.num_from_scores, round.num_verified_from_scores,
+                 round.num_from_growing, round.num_verified - round.num_verified_from_scores);
   }
 
   if (options.write_matrix_images) {
