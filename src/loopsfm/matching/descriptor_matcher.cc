@@ -4,6 +4,7 @@
 #include <cstdint>
 #include <cstring>
 #include <limits>
+#include <memory>
 #include <vector>
 
 #include <Eigen/Core>
@@ -111,7 +112,8 @@ void SearchBest2(const FloatDescriptors& f1, const FloatDescriptors& f2, Best2* 
   const int n2_padded = static_cast<int>(f2.values.rows());
   rows->Init(n1);
   if (kColumns) cols->Init(n2_padded);
-  std::vector<float> tile(static_cast<size_t>(kRowBlock) * kColBlock);
+  // Every tile entry is written by the GEMM before it is read: no need to zero 1 MB per pair.
+  const std::unique_ptr<float[]> tile(new float[static_cast<size_t>(kRowBlock) * kColBlock]);
   std::vector<float> lane_d1(static_cast<size_t>(kRowBlock) * kLanes);
   std::vector<float> lane_d2(lane_d1.size());
   std::vector<int32_t> lane_idx(lane_d1.size());
@@ -123,11 +125,11 @@ void SearchBest2(const FloatDescriptors& f1, const FloatDescriptors& f2, Best2* 
     std::fill(lane_idx.begin(), lane_idx.end(), -1);
     for (int c0 = 0; c0 < n2_padded; c0 += kColBlock) {
       const int num_cols = std::min(kColBlock, n2_padded - c0);
-      Eigen::Map<RowMatrixXf> dots(tile.data(), num_rows, num_cols);
+      Eigen::Map<RowMatrixXf> dots(tile.get(), num_rows, num_cols);
       dots.noalias() =
           f1.values.middleRows(r0, num_rows) * f2.values.middleRows(c0, num_cols).transpose();
       for (int r = 0; r < num_rows; ++r) {
-        ScanTileRow<kColumns>(tile.data() + static_cast<size_t>(r) * num_cols, num_cols,
+        ScanTileRow<kColumns>(tile.get() + static_cast<size_t>(r) * num_cols, num_cols,
                               f1.sq_norms[r0 + r], f2.sq_norms.data() + c0, r0 + r, c0,
                               lane_d1.data() + r * kLanes, lane_d2.data() + r * kLanes,
                               lane_idx.data() + r * kLanes,
