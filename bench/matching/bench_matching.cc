@@ -250,6 +250,13 @@ int main(int argc, char** argv) {
       for (auto _ : state) benchmark::DoNotOptimize(MatchDescriptors(data->d1, data->d2, options));
       state.counters["pairs_per_s"] = benchmark::Counter(state.iterations(), benchmark::Counter::kIsRate);
     })->Unit(benchmark::kMillisecond)->UseRealTime();
+    benchmark::RegisterBenchmark(("match/loopsfm_float_kernel/" + size).c_str(),
+                                 [data](benchmark::State& state) {
+      DescriptorMatchingOptions options;  // cross check as the default, Eigen's float GEMM
+      options.use_int8_kernel = false;
+      for (auto _ : state) benchmark::DoNotOptimize(MatchDescriptors(data->d1, data->d2, options));
+      state.counters["pairs_per_s"] = benchmark::Counter(state.iterations(), benchmark::Counter::kIsRate);
+    })->Unit(benchmark::kMillisecond)->UseRealTime();
     benchmark::RegisterBenchmark(("match/opencv_bf/" + size).c_str(), [data](benchmark::State& state) {
       for (auto _ : state) benchmark::DoNotOptimize(BfMatches(*data));
       state.counters["pairs_per_s"] = benchmark::Counter(state.iterations(), benchmark::Counter::kIsRate);
@@ -275,9 +282,12 @@ int main(int argc, char** argv) {
   std::printf("\nDescriptors: %s. Times in ms per pair (wall clock; CPU time in brackets),\n"
               "median over repetitions when --benchmark_repetitions is given.\n",
               rows.front().data->source.c_str());
-  std::printf("%-10s %-18s %-18s %-18s %-14s %-9s %-19s %-16s %s\n", "features", "loopsfm",
-              "loopsfm+xcheck", "opencv_bf", "pairs/s ours", "bf", "speed-up wall/cpu",
-              "matches ours/bf", "agree");
+  std::printf("Kernel: %s.\n", Int8DescriptorKernelAvailable()
+                                   ? "int8 (AVX-512 VNNI); xcheck-float is the float GEMM kernel"
+                                   : "float GEMM (no AVX-512 VNNI on this CPU)");
+  std::printf("%-10s %-18s %-18s %-18s %-18s %-14s %-9s %-19s %-16s %s\n", "features", "loopsfm",
+              "loopsfm+xcheck", "xcheck-float", "opencv_bf", "pairs/s ours", "bf",
+              "speed-up wall/cpu", "matches ours/bf", "agree");
   for (const Row& row : rows) {
     const std::string size = std::to_string(row.requested);
     auto cell = [&](const std::string& name) {
@@ -295,9 +305,10 @@ int main(int argc, char** argv) {
     std::snprintf(speedup, sizeof(speedup), "%.1fx / %.1fx", bf / ours,
                   reporter.CpuMs("match/opencv_bf/" + size) /
                       reporter.CpuMs("match/loopsfm/" + size));
-    std::printf("%-10s %-18s %-18s %-18s %-14.1f %-9.1f %-19s %-16s %.2f%%\n", features.c_str(),
-                cell("match/loopsfm/" + size).c_str(),
+    std::printf("%-10s %-18s %-18s %-18s %-18s %-14.1f %-9.1f %-19s %-16s %.2f%%\n",
+                features.c_str(), cell("match/loopsfm/" + size).c_str(),
                 cell("match/loopsfm_cross_check/" + size).c_str(),
+                cell("match/loopsfm_float_kernel/" + size).c_str(),
                 cell("match/opencv_bf/" + size).c_str(), 1000.0 / ours, 1000.0 / bf,
                 speedup, counts.c_str(),
                 100.0 * row.common / std::max<size_t>(1, std::max(row.ours, row.bf)));

@@ -9,6 +9,10 @@
 
 #include <Eigen/Core>
 
+#if defined(__x86_64__)
+#include <immintrin.h>
+#endif
+
 #include "loopsfm/util/errors.h"
 
 namespace loopsfm {
@@ -104,15 +108,18 @@ inline void ScanTileRow(const float* __restrict dots, int num_cols, float a2,
   std::memcpy(lane_idx, &li, sizeof(li));
 }
 
-// Exact best-2 search in both directions (columns only when kColumns) by blocked GEMM.
-template <bool kColumns>
-void SearchBest2(const FloatDescriptors& f1, const FloatDescriptors& f2, Best2* rows,
+// Exact best-2 search in both directions (columns only when kColumns), tile by tile:
+// fill_tile(r0, num_rows, c0, num_cols, tile) writes the num_rows x num_cols dot products
+// (row-major) such that row_norms[r] + col_norms[c] - 2 tile(r, c) is the squared distance.
+// Columns are padded to a multiple of kLanes with infinite norms.
+template <bool kColumns, typename FillTile>
+void SearchBest2(int n1, const std::vector<float>& row_norms,
+                 const std::vector<float>& col_norms, FillTile&& fill_tile, Best2* rows,
                  Best2* cols) {
-  const int n1 = f1.num;
-  const int n2_padded = static_cast<int>(f2.values.rows());
+  const int n2_padded = static_cast<int>(col_norms.size());
   rows->Init(n1);
   if (kColumns) cols->Init(n2_padded);
-  // Every tile entry is written by the GEMM before it is read: no need to zero 1 MB per pair.
+  // Every tile entry is written before it is read: no need to zero 1 MB per pair.
   const std::unique_ptr<float[]> tile(new float[static_cast<size_t>(kRowBlock) * kColBlock]);
   std::vector<float> lane_d1(static_cast<size_t>(kRowBlock) * kLanes);
   std::vector<float> lane_d2(lane_d1.size());
@@ -125,12 +132,10 @@ void SearchBest2(const FloatDescriptors& f1, const FloatDescriptors& f2, Best2* 
     std::fill(lane_idx.begin(), lane_idx.end(), -1);
     for (int c0 = 0; c0 < n2_padded; c0 += kColBlock) {
       const int num_cols = std::min(kColBlock, n2_padded - c0);
-      Eigen::Map<RowMatrixXf> dots(tile.get(), num_rows, num_cols);
-      dots.noalias() =
-          f1.values.middleRows(r0, num_rows) * f2.values.middleRows(c0, num_cols).transpose();
+      fill_tile(r0, num_rows, c0, num_cols, tile.get());
       for (int r = 0; r < num_rows; ++r) {
         ScanTileRow<kColumns>(tile.get() + static_cast<size_t>(r) * num_cols, num_cols,
-                              f1.sq_norms[r0 + r], f2.sq_norms.data() + c0, r0 + r, c0,
+                              row_norms[r0 + r], col_norms.data() + c0, r0 + r, c0,
                               lane_d1.data() + r * kLanes, lane_d2.data() + r * kLanes,
                               lane_idx.data() + r * kLanes,
                               kColumns ? cols->d1.data() + c0 : nullptr,
@@ -161,6 +166,154 @@ void SearchBest2(const FloatDescriptors& f1, const FloatDescriptors& f2, Best2* 
   }
 }
 
+// The float kernel: Eigen's GEMM on float copies (exact: every partial sum is an integer
+// below 2^24).
+template <bool kColumns>
+void SearchBest2Float(const FeatureDescriptors& d1, const FeatureDescriptors& d2, Best2* rows,
+                      Best2* cols) {
+  const FloatDescriptors f1 = ToFloat(d1, 1);
+  const FloatDescriptors f2 = ToFloat(d2, kLanes);
+  SearchBest2<kColumns>(
+      f1.num, f1.sq_norms, f2.sq_norms,
+      [&](int r0, int num_rows, int c0, int num_cols, float* tile) {
+        Eigen::Map<RowMatrixXf> dots(tile, num_rows, num_cols);
+        dots.noalias() =
+            f1.values.middleRows(r0, num_rows) * f2.values.middleRows(c0, num_cols).transpose();
+      },
+      rows, cols);
+}
+
+#if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
+#define LOOPSFM_HAVE_VNNI_KERNEL 1
+#define LOOPSFM_VNNI_TARGET __attribute__((target("avx512f,avx512bw,avx512vnni")))
+
+// The int8 kernel (AVX-512 VNNI): vpdpbusd multiplies 64 unsigned by 64 signed bytes and adds
+// them in groups of four to 16 int32 lanes, four times the multiply-adds of a float FMA.
+// Image 2's descriptors b are stored as signed bytes b - 128, so a.b = a.(b - 128) +
+// 128 sum(a): the row term becomes |a|^2 - 256 sum(a), and the integer dot products stay
+// exact (|a.(b - 128)| < 2^23), as do their float copies.
+constexpr int kGroup = 16;                        // columns per packed group (one zmm of int32)
+constexpr int kGroupBytes = kGroup * kDescriptorDim;  // 2048
+
+// Image 2 in groups of 16 descriptors, within a group 32 blocks of 64 bytes: block q holds
+// bytes 4q..4q+3 of each of the 16 descriptors, minus 128. Padded to a multiple of 32
+// descriptors (two groups per kernel step) with infinite norms.
+struct PackedColumns {
+  std::vector<int8_t> bytes;
+  std::vector<float> sq_norms;
+};
+
+PackedColumns PackColumns(const FeatureDescriptors& d) {
+  const int n = static_cast<int>(d.rows());
+  const int padded = (n + 2 * kGroup - 1) / (2 * kGroup) * (2 * kGroup);
+  PackedColumns packed;
+  packed.bytes.assign(static_cast<size_t>(padded) * kDescriptorDim, 0);
+  packed.sq_norms.assign(padded, kInf);
+  for (int j = 0; j < n; ++j) {
+    const uint8_t* row = d.data() + static_cast<size_t>(j) * kDescriptorDim;
+    int8_t* group = packed.bytes.data() + static_cast<size_t>(j / kGroup) * kGroupBytes;
+    const int lane = j % kGroup;
+    int32_t sq = 0;
+    for (int k = 0; k < kDescriptorDim; ++k) {
+      group[(k / 4) * 64 + lane * 4 + k % 4] = static_cast<int8_t>(static_cast<int>(row[k]) - 128);
+      sq += static_cast<int32_t>(row[k]) * row[k];
+    }
+    packed.sq_norms[j] = static_cast<float>(sq);
+  }
+  return packed;
+}
+
+// |a|^2 - 256 sum(a) per row: the row term that goes with the offset column bytes.
+std::vector<float> OffsetRowNorms(const FeatureDescriptors& d) {
+  std::vector<float> norms(d.rows());
+  for (Eigen::Index i = 0; i < d.rows(); ++i) {
+    int32_t sq = 0, sum = 0;
+    for (int k = 0; k < kDescriptorDim; ++k) {
+      const int32_t v = d(i, k);
+      sq += v * v;
+      sum += v;
+    }
+    norms[i] = static_cast<float>(sq - 256 * sum);
+  }
+  return norms;
+}
+
+// Dot products of kRows rows of a (unsigned bytes) with two packed groups, as floats into
+// tile rows of stride ld.
+template <int kRows>
+LOOPSFM_VNNI_TARGET inline void DotRowsTwoGroups(const uint8_t* a, const int8_t* groups,
+                                                 float* tile, int ld) {
+  __m512i acc[kRows][2];
+  for (int r = 0; r < kRows; ++r) acc[r][0] = acc[r][1] = _mm512_setzero_si512();
+  for (int q = 0; q < kDescriptorDim / 4; ++q) {
+    const __m512i b0 = _mm512_loadu_si512(groups + q * 64);
+    const __m512i b1 = _mm512_loadu_si512(groups + kGroupBytes + q * 64);
+    for (int r = 0; r < kRows; ++r) {
+      int32_t quad;
+      std::memcpy(&quad, a + r * kDescriptorDim + 4 * q, sizeof(quad));
+      const __m512i va = _mm512_set1_epi32(quad);
+      acc[r][0] = _mm512_dpbusd_epi32(acc[r][0], va, b0);
+      acc[r][1] = _mm512_dpbusd_epi32(acc[r][1], va, b1);
+    }
+  }
+  for (int r = 0; r < kRows; ++r) {
+    _mm512_storeu_ps(tile + r * ld, _mm512_cvtepi32_ps(acc[r][0]));
+    _mm512_storeu_ps(tile + r * ld + kGroup, _mm512_cvtepi32_ps(acc[r][1]));
+  }
+}
+
+LOOPSFM_VNNI_TARGET void FillTileVnni(const FeatureDescriptors& d1, const PackedColumns& packed,
+                                      int r0, int num_rows, int c0, int num_cols, float* tile) {
+  const uint8_t* a = d1.data() + static_cast<size_t>(r0) * kDescriptorDim;
+  const int8_t* first_group = packed.bytes.data() + static_cast<size_t>(c0 / kGroup) * kGroupBytes;
+  for (int c = 0; c < num_cols; c += 2 * kGroup) {
+    const int8_t* groups = first_group + static_cast<size_t>(c / kGroup) * kGroupBytes;
+    int r = 0;
+    for (; r + 4 <= num_rows; r += 4) {
+      DotRowsTwoGroups<4>(a + static_cast<size_t>(r) * kDescriptorDim, groups,
+                          tile + static_cast<size_t>(r) * num_cols + c, num_cols);
+    }
+    for (; r < num_rows; ++r) {
+      DotRowsTwoGroups<1>(a + static_cast<size_t>(r) * kDescriptorDim, groups,
+                          tile + static_cast<size_t>(r) * num_cols + c, num_cols);
+    }
+  }
+}
+
+template <bool kColumns>
+void SearchBest2Vnni(const FeatureDescriptors& d1, const FeatureDescriptors& d2, Best2* rows,
+                     Best2* cols) {
+  static_assert(kColBlock % (2 * kGroup) == 0);
+  const PackedColumns packed = PackColumns(d2);
+  SearchBest2<kColumns>(
+      static_cast<int>(d1.rows()), OffsetRowNorms(d1), packed.sq_norms,
+      [&](int r0, int num_rows, int c0, int num_cols, float* tile) {
+        FillTileVnni(d1, packed, r0, num_rows, c0, num_cols, tile);
+      },
+      rows, cols);
+}
+
+bool CpuHasVnni() {
+  static const bool has = __builtin_cpu_supports("avx512f") &&
+                          __builtin_cpu_supports("avx512bw") &&
+                          __builtin_cpu_supports("avx512vnni");
+  return has;
+}
+#else
+bool CpuHasVnni() { return false; }
+#endif
+
+// Best-2 search with the fastest exact kernel allowed and available.
+template <bool kColumns>
+void SearchBest2Any(const FeatureDescriptors& d1, const FeatureDescriptors& d2, bool use_int8,
+                    Best2* rows, Best2* cols) {
+#ifdef LOOPSFM_HAVE_VNNI_KERNEL
+  if (use_int8 && CpuHasVnni()) return SearchBest2Vnni<kColumns>(d1, d2, rows, cols);
+#endif
+  (void)use_int8;
+  SearchBest2Float<kColumns>(d1, d2, rows, cols);
+}
+
 }  // namespace
 
 void DescriptorMatchingOptions::Check() const {
@@ -171,8 +324,11 @@ void DescriptorMatchingOptions::Check() const {
                          max_distance);
 }
 
+bool Int8DescriptorKernelAvailable() { return CpuHasVnni(); }
+
 NearestNeighbors FindNearestNeighbors(const FeatureDescriptors& descriptors1,
-                                      const FeatureDescriptors& descriptors2) {
+                                      const FeatureDescriptors& descriptors2,
+                                      bool use_int8_kernel) {
   NearestNeighbors nn;
   const size_t n1 = descriptors1.rows();
   if (descriptors2.rows() == 0) {
@@ -182,7 +338,7 @@ NearestNeighbors FindNearestNeighbors(const FeatureDescriptors& descriptors1,
     return nn;
   }
   Best2 rows;
-  SearchBest2<false>(ToFloat(descriptors1, 1), ToFloat(descriptors2, kLanes), &rows, nullptr);
+  SearchBest2Any<false>(descriptors1, descriptors2, use_int8_kernel, &rows, nullptr);
   nn.index.assign(rows.idx.begin(), rows.idx.end());
   nn.best_distance = std::move(rows.d1);
   nn.second_distance = std::move(rows.d2);
@@ -195,13 +351,13 @@ FeatureMatches MatchDescriptors(const FeatureDescriptors& descriptors1,
   options.Check();
   FeatureMatches matches;
   if (descriptors1.rows() == 0 || descriptors2.rows() == 0) return matches;
-  const FloatDescriptors f1 = ToFloat(descriptors1, 1);
-  const FloatDescriptors f2 = ToFloat(descriptors2, kLanes);
+  const int n1 = static_cast<int>(descriptors1.rows());
+  const int n2 = static_cast<int>(descriptors2.rows());
   Best2 rows, cols;
   if (options.cross_check) {
-    SearchBest2<true>(f1, f2, &rows, &cols);
+    SearchBest2Any<true>(descriptors1, descriptors2, options.use_int8_kernel, &rows, &cols);
   } else {
-    SearchBest2<false>(f1, f2, &rows, nullptr);
+    SearchBest2Any<false>(descriptors1, descriptors2, options.use_int8_kernel, &rows, nullptr);
   }
 
   // Squared distances are in uint8 units: a unit-length descriptor has norm 512.
@@ -213,8 +369,8 @@ FeatureMatches MatchDescriptors(const FeatureDescriptors& descriptors1,
     return best <= max_sq_distance && best < sq_ratio * second;
   };
 
-  matches.reserve(std::min(f1.num, f2.num));
-  for (int i = 0; i < f1.num; ++i) {
+  matches.reserve(std::min(n1, n2));
+  for (int i = 0; i < n1; ++i) {
     const int32_t j = rows.idx[i];
     if (j < 0 || !passes(rows.d1[i], rows.d2[i])) continue;
     if (options.cross_check && (cols.idx[j] != i || !passes(cols.d1[j], cols.d2[j]))) continue;

@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <limits>
 #include <set>
 
@@ -132,40 +133,80 @@ PermutedSet MakePermutedSet(int n1, int num_shared, int num_distractors, double 
   return set;
 }
 
-TEST(FindNearestNeighbors, AgreesExactlyWithBruteForce) {
-  Random random(7);
-  // Sizes that span several GEMM row and column blocks and are not multiples of the lanes.
-  for (const auto& [n1, n2] : {std::pair{1, 1}, {3, 2}, {600, 1500}, {257, 1041}}) {
-    // Half of image 1 is a noisy copy of image 2, so near and far neighbours both occur.
-    const FeatureDescriptors d2 = RandomDescriptors(n2, random);
-    FeatureDescriptors d1 = RandomDescriptors(n1, random);
-    for (int i = 0; i < n1 / 2; ++i) d1.row(i) = d2.row(i % n2);
-    const NearestNeighbors nn = FindNearestNeighbors(d1, d2);
-    const Reference ref = BruteForce(d1, d2);
-    ASSERT_EQ(nn.index.size(), static_cast<size_t>(n1));
-    for (int i = 0; i < n1; ++i) {
-      ASSERT_EQ(nn.index[i], ref.index[i]) << "row " << i << " of " << n1 << "x" << n2;
-      ASSERT_EQ(nn.best_distance[i], static_cast<float>(ref.best[i]));
-      if (n2 == 1) {
-        ASSERT_TRUE(std::isinf(nn.second_distance[i]));
-      } else {
-        ASSERT_EQ(nn.second_distance[i], static_cast<float>(ref.second[i]));
-      }
+void ExpectAgreesWithBruteForce(const FeatureDescriptors& d1, const FeatureDescriptors& d2,
+                                bool use_int8_kernel) {
+  const int n1 = static_cast<int>(d1.rows()), n2 = static_cast<int>(d2.rows());
+  const NearestNeighbors nn = FindNearestNeighbors(d1, d2, use_int8_kernel);
+  const Reference ref = BruteForce(d1, d2);
+  ASSERT_EQ(nn.index.size(), static_cast<size_t>(n1));
+  for (int i = 0; i < n1; ++i) {
+    ASSERT_EQ(nn.index[i], ref.index[i]) << "row " << i << " of " << n1 << "x" << n2;
+    ASSERT_EQ(nn.best_distance[i], static_cast<float>(ref.best[i]));
+    if (n2 == 1) {
+      ASSERT_TRUE(std::isinf(nn.second_distance[i]));
+    } else {
+      ASSERT_EQ(nn.second_distance[i], static_cast<float>(ref.second[i]));
     }
+  }
+}
+
+// Both kernels: the float one always, the integer one where the CPU has AVX-512 VNNI (else
+// the flag falls back to the float kernel and this repeats it).
+TEST(FindNearestNeighbors, AgreesExactlyWithBruteForce) {
+  if (!Int8DescriptorKernelAvailable()) {
+    std::printf("note: no AVX-512 VNNI on this CPU; only the float kernel is tested\n");
+  }
+  for (const bool use_int8 : {false, true}) {
+    Random random(7);
+    // Sizes that span several GEMM row and column blocks and are not multiples of the lanes
+    // (nor of the integer kernel's 4 rows and 32 columns).
+    for (const auto& [n1, n2] : {std::pair{1, 1}, {3, 2}, {600, 1500}, {257, 1041}, {5, 33}}) {
+      // Half of image 1 is a noisy copy of image 2, so near and far neighbours both occur.
+      const FeatureDescriptors d2 = RandomDescriptors(n2, random);
+      FeatureDescriptors d1 = RandomDescriptors(n1, random);
+      for (int i = 0; i < n1 / 2; ++i) d1.row(i) = d2.row(i % n2);
+      SCOPED_TRACE(use_int8 ? "int8 kernel" : "float kernel");
+      ExpectAgreesWithBruteForce(d1, d2, use_int8);
+    }
+  }
+}
+
+// Bytes over the whole 0..255 range, all-0 and all-255 rows included: the largest dot
+// products and norms the integer and float arithmetic must hold exactly.
+TEST(FindNearestNeighbors, ExactOverTheFullByteRange) {
+  Random random(17);
+  auto random_bytes = [&](int n) {
+    FeatureDescriptors d(n, kDescriptorDim);
+    for (int i = 0; i < n; ++i) {
+      for (int k = 0; k < kDescriptorDim; ++k) d(i, k) = static_cast<uint8_t>(random.UniformInt(0, 255));
+    }
+    d.row(0).setConstant(255);
+    d.row(1).setZero();
+    return d;
+  };
+  const FeatureDescriptors d1 = random_bytes(70), d2 = random_bytes(45);
+  for (const bool use_int8 : {false, true}) {
+    SCOPED_TRACE(use_int8 ? "int8 kernel" : "float kernel");
+    ExpectAgreesWithBruteForce(d1, d2, use_int8);
+    ExpectAgreesWithBruteForce(d2, d1, use_int8);
   }
 }
 
 TEST(MatchDescriptors, AgreesWithReferenceMatcher) {
   Random random(11);
   const PermutedSet set = MakePermutedSet(700, 500, 900, 0.05, random);
-  for (const bool cross_check : {false, true}) {
-    for (const double max_distance : {0.7, 2.0}) {
-      DescriptorMatchingOptions options;
-      options.cross_check = cross_check;
-      options.max_distance = max_distance;
-      EXPECT_EQ(MatchDescriptors(set.d1, set.d2, options),
-                ReferenceMatches(set.d1, set.d2, options))
-          << "cross_check " << cross_check << " max_distance " << max_distance;
+  for (const bool use_int8 : {false, true}) {
+    for (const bool cross_check : {false, true}) {
+      for (const double max_distance : {0.7, 2.0}) {
+        DescriptorMatchingOptions options;
+        options.use_int8_kernel = use_int8;
+        options.cross_check = cross_check;
+        options.max_distance = max_distance;
+        EXPECT_EQ(MatchDescriptors(set.d1, set.d2, options),
+                  ReferenceMatches(set.d1, set.d2, options))
+            << "int8 " << use_int8 << " cross_check " << cross_check << " max_distance "
+            << max_distance;
+      }
     }
   }
 }
