@@ -347,15 +347,6 @@ TwoViewVerification VerifyTwoViewGeometry(const Camera& camera1,
   const double threshold_normalized =
       options.max_error / (0.5 * (camera1.MeanFocalLength() + camera2.MeanFocalLength()));
 
-  ModelEstimate F = RunEstimator(n, [&](cv::Mat& mask) {
-    return cv::findFundamentalMat(pixels1, pixels2, mask,
-                                  MakeUsacParams(options, options.max_error, seed_F));
-  });
-  PolishFundamental(pixel_points1, pixel_points2, options.max_error, &F);
-  const ModelEstimate H = RunEstimator(n, [&](cv::Mat& mask) {
-    return cv::findHomography(pixels1, pixels2, mask,
-                              MakeUsacParams(options, options.max_error, seed_H));
-  });
   const bool calibrated = camera1.has_prior_focal_length && camera2.has_prior_focal_length;
   ModelEstimate E;
   Rigid3d calibrated_pose;
@@ -378,6 +369,24 @@ TwoViewVerification VerifyTwoViewGeometry(const Camera& camera1,
       E.num_inliers = static_cast<int>(std::count(E.inliers.begin(), E.inliers.end(), 1));
     }
   }
+  // F is needed only when E might not explain nearly as many matches as F: E with at least
+  // min_E_F_inlier_ratio of all matches wins against any F (F's inliers are matches too).
+  // Otherwise F comes from E and the intrinsics, and num_F_inliers stays 0 (not estimated).
+  ModelEstimate F;
+  if (!calibrated || E.num_inliers < options.min_E_F_inlier_ratio * static_cast<double>(n)) {
+    F = RunEstimator(n, [&](cv::Mat& mask) {
+      return cv::findFundamentalMat(pixels1, pixels2, mask,
+                                    MakeUsacParams(options, options.max_error, seed_F));
+    });
+    PolishFundamental(pixel_points1, pixel_points2, options.max_error, &F);
+  } else {
+    F.model = CalibrationMatrix(camera2).transpose().inverse() * E.model *
+              CalibrationMatrix(camera1).inverse();
+  }
+  const ModelEstimate H = RunEstimator(n, [&](cv::Mat& mask) {
+    return cv::findHomography(pixels1, pixels2, mask,
+                              MakeUsacParams(options, options.max_error, seed_H));
+  });
   result.num_E_inliers = E.num_inliers;
   result.num_F_inliers = F.num_inliers;
   result.num_H_inliers = H.num_inliers;

@@ -2,7 +2,8 @@
 // Geometric verification of the raw matches of an image pair (COLMAP's two-view geometry).
 //
 // Estimates with OpenCV's USAC (LO-RANSAC, MSAC scoring):
-//   - the fundamental matrix F and the homography H on the pixel coordinates;
+//   - the fundamental matrix F and the homography H on the pixel coordinates (F only when E
+//     leaves it a chance: see num_F_inliers);
 //   - the essential matrix E on normalised, undistorted coordinates (Camera::CamFromImg) when
 //     both cameras have a prior focal length, with threshold max_error / mean focal length;
 // and classifies the pair as COLMAP does: kCalibrated (E explains nearly as many matches as
@@ -62,7 +63,9 @@ struct TwoViewVerification {
   TwoViewGeometry geometry;
   // Number of raw matches given.
   int num_matches = 0;
-  // Inliers of each model (num_E_inliers is 0 when E was not estimated).
+  // Inliers of each model. num_E_inliers is 0 when E was not estimated (no intrinsics);
+  // num_F_inliers is 0 when F was not needed: E's inliers are at least min_E_F_inlier_ratio
+  // of all matches, so no F could make the pair uncalibrated (geometry.F then comes from E).
   int num_E_inliers = 0;
   int num_F_inliers = 0;
   int num_H_inliers = 0;
