@@ -260,7 +260,9 @@ def write_outputs(args, results, started):
                 f"Run {time.strftime('%Y-%m-%d %H:%M', time.localtime(started))}, "
                 f"{os.cpu_count()} CPUs, loopsfm `--threads {args.threads or 'all'}`, "
                 f"{args.runs} run(s) per lowres/vocabtree timing (median). "
-                f"1-minute load average at each run's start is in results.json.\n"]
+                f"1-minute load average at each run's start is in results.json. † marks a time whose "
+                f"run's median matching time per pair was over {gm_report.SLOW}x the truth run's "
+                f"(slowed by other jobs, or a different mix of pairs).\n"]
     if results["density_sweep"]:
         sections += ["## 1. Density sweep (fixed frames)\n",
                      gm_report.sweep_table(results["density_sweep"]), ""]
