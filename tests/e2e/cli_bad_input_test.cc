@@ -376,6 +376,12 @@ TEST_F(CliBadInputTest, BadFlagValues) {
       {{"match", "-d", db_.string(), "--pairs", "foo"}, "foo.*exhaustive.*sequential"},
       {{"match", "-d", db_.string(), "--ratio", "1.5"}, "ratio.*1\\.5"},
       {{"match", "-d", db_.string(), "--overlap", "0"}, "overlap.*\\b0\\b"},
+      {{"match", "-d", db_.string(), "--pairs", "vocabtree", "--similarity-out",
+        (dir() / "no_such_folder" / "sim.txt").string()},
+       "similarity-out.*no_such_folder.*does not exist"},
+      {{"match", "-d", db_.string(), "--pairs", "sequential", "--similarity-out",
+        (dir() / "sim.txt").string()},
+       "similarity-out.*vocabtree"},
       {{"reconstruct", images, "-o", (dir() / "out").string(), "--pairs", "foo"}, "foo"},
       {{"reconstruct", images, "-o", (dir() / "out").string(), "--every", "0"}, "--every"},
   };

@@ -1,9 +1,11 @@
 #include "loopsfm/cli/stage_flags.h"
 
 #include <algorithm>
+#include <filesystem>
 
 #include "loopsfm/cli/common.h"
 #include "loopsfm/scene/dataset_files.h"
+#include "loopsfm/util/errors.h"
 
 namespace loopsfm::cli {
 
@@ -81,6 +83,19 @@ MatchOptions MatchFlags::Resolve(bool video_input) const {
   resolved.sequential.initial_overlap =
       std::max(resolved.sequential.initial_overlap, resolved.sequential.overlap);
   if (!vocab.empty()) resolved.vocab_path = vocab;
+  if (!resolved.similarity_path.empty()) {
+    // Checked before any matching, so a typo does not cost a run.
+    if (resolved.strategy != PairStrategy::kVocabTree) {
+      throw InvalidArgument("--similarity-out needs --pairs vocabtree (only the vocabulary tree "
+                            "computes a similarity matrix)");
+    }
+    const std::filesystem::path folder =
+        std::filesystem::absolute(resolved.similarity_path).parent_path();
+    if (!std::filesystem::is_directory(folder)) {
+      throw InvalidArgument(fmt::format("--similarity-out: folder '{}' does not exist; create it "
+                                        "or choose another path", folder.string()));
+    }
+  }
   resolved.num_threads = Common().threads;
   resolved.show_progress = !Common().quiet;
   resolved.Check();
