@@ -346,6 +346,8 @@ TwoViewVerification VerifyTwoViewGeometry(const Camera& camera1,
   }
   const double threshold_normalized =
       options.max_error / (0.5 * (camera1.MeanFocalLength() + camera2.MeanFocalLength()));
+  const Eigen::Matrix3d K1 = CalibrationMatrix(camera1);
+  const Eigen::Matrix3d K2 = CalibrationMatrix(camera2);
 
   const bool calibrated = camera1.has_prior_focal_length && camera2.has_prior_focal_length;
   ModelEstimate E;
@@ -380,8 +382,7 @@ TwoViewVerification VerifyTwoViewGeometry(const Camera& camera1,
     });
     PolishFundamental(pixel_points1, pixel_points2, options.max_error, &F);
   } else {
-    F.model = CalibrationMatrix(camera2).transpose().inverse() * E.model *
-              CalibrationMatrix(camera1).inverse();
+    F.model = K2.transpose().inverse() * E.model * K1.inverse();
   }
   const ModelEstimate H = RunEstimator(n, [&](cv::Mat& mask) {
     return cv::findHomography(pixels1, pixels2, mask,
@@ -416,8 +417,6 @@ TwoViewVerification VerifyTwoViewGeometry(const Camera& camera1,
   geometry.config = config;
   geometry.F = F.model;
   geometry.H = H.model;
-  const Eigen::Matrix3d K1 = CalibrationMatrix(camera1);
-  const Eigen::Matrix3d K2 = CalibrationMatrix(camera2);
   std::vector<char> inlier_mask = best->inliers;
   Rigid3d pose;
   if (config == TwoViewGeometry::kCalibrated) {

@@ -9,8 +9,6 @@
 //   num_nodes x 128 float32 centres
 //   uint64   FNV-1a hash of every byte before it
 
-#include <algorithm>
-#include <bit>
 #include <cmath>
 #include <cstring>
 #include <fstream>
@@ -18,6 +16,7 @@
 #include <string_view>
 
 #include "loopsfm/retrieval/vocabulary_tree.h"
+#include "loopsfm/util/endian.h"
 #include "loopsfm/util/errors.h"
 
 namespace loopsfm {
@@ -43,24 +42,13 @@ class Fnv1a {
   uint64_t hash_ = 0xcbf29ce484222325ull;
 };
 
-template <typename T>
-T ToLittleEndian(T value) {
-  if constexpr (std::endian::native == std::endian::big) {
-    char bytes[sizeof(T)];
-    std::memcpy(bytes, &value, sizeof(T));
-    std::reverse(bytes, bytes + sizeof(T));
-    std::memcpy(&value, bytes, sizeof(T));
-  }
-  return value;
-}
-
 // Buffered little-endian writer that hashes what it writes.
 class Writer {
  public:
   explicit Writer(std::ofstream& out) : out_(out) {}
   template <typename T>
   void Put(T value) {
-    value = ToLittleEndian(value);
+    value = ToFromLittleEndian(value);
     buffer_.append(reinterpret_cast<const char*>(&value), sizeof(T));
     if (buffer_.size() >= (1 << 20)) Flush();
   }
@@ -86,14 +74,14 @@ class Reader {
     T value;
     in_.read(reinterpret_cast<char*>(&value), sizeof(T));
     hash_.Add(reinterpret_cast<const char*>(&value), sizeof(T));
-    return ToLittleEndian(value);
+    return ToFromLittleEndian(value);
   }
   // Reads n values of T into out, hashing them.
   template <typename T>
   void GetArray(T* out, size_t n) {
     in_.read(reinterpret_cast<char*>(out), static_cast<std::streamsize>(n * sizeof(T)));
     hash_.Add(reinterpret_cast<const char*>(out), n * sizeof(T));
-    for (size_t i = 0; i < n; ++i) out[i] = ToLittleEndian(out[i]);
+    for (size_t i = 0; i < n; ++i) out[i] = ToFromLittleEndian(out[i]);
   }
   bool Good() const { return static_cast<bool>(in_); }
   uint64_t Hash() const { return hash_.Value(); }
@@ -126,7 +114,7 @@ void VocabularyTree::Save(const std::filesystem::path& path) const {
     }
     for (const float value : centres_) writer.Put<float>(value);
     writer.Flush();
-    const uint64_t hash = ToLittleEndian(writer.Hash());
+    const uint64_t hash = ToFromLittleEndian(writer.Hash());
     out.write(reinterpret_cast<const char*>(&hash), sizeof(hash));
     out.close();
     if (!out) {

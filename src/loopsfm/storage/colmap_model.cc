@@ -1,12 +1,11 @@
 #include "loopsfm/storage/colmap_model.h"
 
-#include <algorithm>
-#include <bit>
 #include <cstring>
 #include <fstream>
 #include <string_view>
 
 #include "loopsfm/storage/colmap_model_internal.h"
+#include "loopsfm/util/endian.h"
 #include "loopsfm/util/errors.h"
 
 namespace loopsfm {
@@ -20,17 +19,6 @@ using colmap_model_internal::SortedCameraIds;
 using colmap_model_internal::SortedPoint3DIds;
 using colmap_model_internal::WrittenElements;
 using colmap_model_internal::WrittenPoint3DId;
-
-template <typename T>
-T ToFromLittleEndian(T value) {
-  if constexpr (std::endian::native == std::endian::big) {
-    char bytes[sizeof(T)];
-    std::memcpy(bytes, &value, sizeof(T));
-    std::reverse(bytes, bytes + sizeof(T));
-    std::memcpy(&value, bytes, sizeof(T));
-  }
-  return value;
-}
 
 class BinaryWriter {
  public:
