@@ -163,10 +163,22 @@ TEST(P3P, NearDegenerateConfigurationsGiveFiniteConsistentPoses) {
       }
       const std::vector<Rigid3d> solutions = SolveP3P(problem.bearings, problem.points3D);
       num_trials += kind == 0 ? 0 : 1;
+      // Consistency tolerance from the conditioning: well-conditioned kinds reproduce their
+      // bearings to ~1e-11 (1e-6 leaves a wide margin); for nearly collinear points the
+      // depths, and so the bearings, carry rounding errors amplified by the inverse of the
+      // third point's relative distance from the line (measured on an AVX-512 machine:
+      // error * eps_rel up to 280 units of roundoff), so allow 1e5 units.
+      double tolerance = 1e-6;
+      if (kind == 0) {
+        const Eigen::Vector3d line = problem.points3D[1] - problem.points3D[0];
+        const double eps_rel =
+            line.cross(problem.points3D[2] - problem.points3D[0]).norm() / line.squaredNorm();
+        tolerance = std::max(1e-6, 1e5 * std::numeric_limits<double>::epsilon() / eps_rel);
+      }
       bool found = false;
       for (const Rigid3d& solution : solutions) {
         ASSERT_TRUE(IsFinite(solution));
-        EXPECT_LT(MaxBearingError(problem, solution), 1e-6) << "kind " << kind;
+        EXPECT_LT(MaxBearingError(problem, solution), tolerance) << "kind " << kind;
         found |= RotationError(solution, problem.cam_from_world) < 1e-3;
       }
       num_found += found && kind != 0 ? 1 : 0;
