@@ -39,8 +39,7 @@ void AddMatchCommand(CLI::App& app) {
                   "Also write the stage report (pairs tried and verified, timings) as JSON");
   cmd->callback([flags] {
     Database database = OpenExistingDatabase(flags->database);
-    const MatchOptions options =
-        flags->match.Resolve(database.ReadMeta("source_kind").value_or("") == "video");
+    const MatchOptions options = flags->match.Resolve();
     const MatchReport report = MatchPairs(database, options);
     spdlog::info(
         "match ({}): {} pairs ({} already stored), {} matched now, {} verified, {:.0f} mean "

@@ -4,7 +4,6 @@
 #include "loopsfm/cli/stage_flags.h"
 #include "loopsfm/pipeline/reconstruct.h"
 #include "loopsfm/util/logging.h"
-#include "loopsfm/video/frame_source.h"
 
 namespace loopsfm::cli {
 namespace {
@@ -57,7 +56,7 @@ void AddReconstructCommand(CLI::App& app) {
   cmd->callback([flags] {
     ReconstructOptions options;
     options.extract = flags->extract.Resolve();
-    options.match = flags->match.Resolve(OpenFrameSource(flags->input)->Info().kind == SourceKind::kVideo);
+    options.match = flags->match.Resolve();
     options.mapper.num_threads = Common().threads;
     options.write_text = flags->text;
     options.show_progress = !Common().quiet;

@@ -38,9 +38,10 @@ ExtractOptions ExtractFlags::Resolve() const {
 
 void AddMatchFlags(CLI::App* cmd, MatchFlags* flags) {
   cmd->add_option("--pairs", flags->pairs,
-                  "Pairing strategy: exhaustive | sequential (default for image folders) | "
-                  "vocabtree (sequential neighbours plus vocabulary-tree loop detection; default "
-                  "for video) | lowres (exhaustive with a low-resolution prefilter)");
+                  "Pairing strategy: vocabtree (default: sequential neighbours, vocabulary-tree loop "
+                  "detection, bridging where the view graph falls apart) | sequential (a fixed "
+                  "window of following frames) | exhaustive | lowres (exhaustive with a "
+                  "low-resolution prefilter)");
   cmd->add_option("--vocab", flags->vocab, "Vocabulary tree file from `loopsfm vocab build` "
                   "(default: train one on the scene's own descriptors)");
   cmd->add_option("--vocab-branching", flags->options.vocab_tree.branching,
@@ -73,11 +74,11 @@ void AddMatchFlags(CLI::App* cmd, MatchFlags* flags) {
       ->capture_default_str();
 }
 
-MatchOptions MatchFlags::Resolve(bool video_input) const {
+MatchOptions MatchFlags::Resolve() const {
   MatchOptions resolved = options;
-  // Video: sequential neighbours plus loop detection, so loops are found without a flag.
-  const std::string fallback = video_input ? "vocabtree" : "sequential";
-  resolved.strategy = ParsePairStrategy(pairs.empty() ? fallback : pairs);
+  // Videos and ordered image folders alike: sequential neighbours plus loop detection, so
+  // loops are found without a flag.
+  resolved.strategy = ParsePairStrategy(pairs.empty() ? "vocabtree" : pairs);
   if (mutual) resolved.matcher.cross_check = true;
   // The wider window of the first frames is never narrower than the requested overlap.
   resolved.sequential.initial_overlap =

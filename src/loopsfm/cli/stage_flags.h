@@ -22,13 +22,12 @@ struct ExtractFlags {
 void AddExtractFlags(CLI::App* cmd, ExtractFlags* flags);
 
 struct MatchFlags {
-  // Empty: the default for the input (vocabtree for video, sequential for image folders).
+  // Empty: the default, vocabtree.
   std::string pairs;
   MatchOptions options;
   bool mutual = false;
   std::string vocab;
-  // `video_input`: the frames came from a video (picks the default strategy).
-  MatchOptions Resolve(bool video_input) const;
+  MatchOptions Resolve() const;
 };
 void AddMatchFlags(CLI::App* cmd, MatchFlags* flags);
 

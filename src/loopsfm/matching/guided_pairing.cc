@@ -13,6 +13,8 @@ void GuidedPairingOptions::Check() const {
   LOOPSFM_REQUIRE_OPTION(max_failure_ratio > 0 && max_failure_ratio <= 1,
                          "failure ratio to stop at must be in (0, 1], got {}", max_failure_ratio);
   LOOPSFM_REQUIRE_OPTION(max_rounds >= 1, "at least one round, got {}", max_rounds);
+  LOOPSFM_REQUIRE_OPTION(min_frame_gap >= 0, "minimum frame gap must not be negative, got {}",
+                         min_frame_gap);
 }
 
 namespace {
@@ -25,7 +27,7 @@ struct IndexPair {
 
 // The k best untried pairs (i < j), best first, ties by index for determinism.
 std::vector<IndexPair> BestUntriedPairs(const Eigen::MatrixXf& scores, const BoolMatrix& tried,
-                                        const BoolMatrix& proposed, int k) {
+                                        const BoolMatrix& proposed, int k, int min_gap) {
   using Entry = std::pair<float, std::pair<int, int>>;
   // Min-heap of the best k seen so far.
   auto worse = [](const Entry& a, const Entry& b) {
@@ -35,7 +37,7 @@ std::vector<IndexPair> BestUntriedPairs(const Eigen::MatrixXf& scores, const Boo
   std::priority_queue<Entry, std::vector<Entry>, decltype(worse)> heap(worse);
   const int n = static_cast<int>(scores.rows());
   for (int i = 0; i < n; ++i) {
-    for (int j = i + 1; j < n; ++j) {
+    for (int j = i + 1 + min_gap; j < n; ++j) {
       if (tried(i, j) || proposed(i, j)) continue;
       const Entry entry{std::max(scores(i, j), scores(j, i)), {i, j}};
       if (static_cast<int>(heap.size()) < k) {
@@ -94,7 +96,7 @@ GuidedPairingReport RunGuidedPairing(const Eigen::MatrixXf& scores,
     }
     const size_t first_from_scores = proposals.size();
     if (num_by_score > 0) {
-      for (const IndexPair& p : BestUntriedPairs(scores, *tried, proposed, num_by_score)) {
+      for (const IndexPair& p : BestUntriedPairs(scores, *tried, proposed, num_by_score, options.min_frame_gap)) {
         stats.num_from_scores += propose(p.i, p.j);
       }
     }

@@ -45,6 +45,8 @@ void MatchOptions::Check() const {
                          lowres_min_matches);
   vocab_tree.Check();
   guided.Check();
+  sequential_waves.Check();
+  bridging.Check();
 }
 
 std::vector<Frame> FramesInCaptureOrder(const Database& database) {
@@ -210,7 +212,20 @@ nlohmann::json ToJson(const MatchReport& r) {
             {"score_seconds", r.vocab.score_seconds},
             {"propose_seconds", r.vocab.propose_seconds},
             {"match_seconds", r.vocab.match_seconds},
-            {"rounds", rounds}}}};
+            {"sequential",
+             {{"tried", r.vocab.sequential.num_tried},
+              {"verified", r.vocab.sequential.num_verified},
+              {"quadratic_tried", r.vocab.sequential.num_quadratic_tried},
+              {"quadratic_verified", r.vocab.sequential.num_quadratic_verified}}},
+            {"rounds", rounds},
+            {"bridging",
+             {{"components_before", r.vocab.bridging.num_components_before},
+              {"largest_component_before", r.vocab.bridging.largest_component_before},
+              {"components_after", r.vocab.bridging.num_components_after},
+              {"largest_component_after", r.vocab.bridging.largest_component_after},
+              {"rounds", r.vocab.bridging.num_rounds},
+              {"tried", r.vocab.bridging.num_tried},
+              {"verified", r.vocab.bridging.num_verified}}}}}};
 }
 
 std::vector<Track> BuildTracksFromDatabase(const Database& database,

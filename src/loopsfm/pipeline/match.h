@@ -18,6 +18,8 @@
 #include "loopsfm/retrieval/vocabulary_tree.h"
 #include "loopsfm/matching/geometric_verification.h"
 #include "loopsfm/matching/pair_selection.h"
+#include "loopsfm/matching/sequential_waves.h"
+#include "loopsfm/matching/view_graph_bridging.h"
 #include "loopsfm/storage/database.h"
 #include "loopsfm/tracks/track_builder.h"
 
@@ -36,7 +38,7 @@ std::string PairStrategyName(PairStrategy strategy);
 
 struct MatchOptions {
   // How pairs are chosen.
-  PairStrategy strategy = PairStrategy::kSequential;
+  PairStrategy strategy = PairStrategy::kVocabTree;
   // Overlaps for sequential pairing.
   SequentialPairingOptions sequential;
   // Nearest-neighbour matching and ratio test.
@@ -49,9 +51,14 @@ struct MatchOptions {
   std::filesystem::path vocab_path;
   // Guided rounds: proposals per round and the stop rule.
   GuidedPairingOptions guided;
-  // Vocabtree: match sequential neighbours first (video frames are ordered), each frame's
-  // window stopping at its first pair that fails verification.
+  // Vocabtree: match sequential neighbours first (video frames are ordered), in waves that
+  // go on past failed pairs and add quadratic steps (see sequential_waves.h).
   bool vocab_include_sequential = true;
+  SequentialWavesOptions sequential_waves;
+  // Vocabtree: after the guided rounds, bridge where the view graph falls apart or a frame
+  // has few verified partners (see view_graph_bridging.h).
+  bool vocab_bridging = true;
+  ViewGraphBridgingOptions bridging;
   // Lowres: features per frame in the prefilter (largest scale first) and the matches
   // the prefilter must find for the pair to be fully matched.
   int lowres_num_features = 300;
@@ -77,7 +84,9 @@ struct VocabTreeTimings {
   double score_seconds = 0.0;    // quantising all frames and the similarity matrix
   double propose_seconds = 0.0;  // choosing pairs in the guided rounds
   double match_seconds = 0.0;    // matching and verifying the proposed pairs
+  SequentialWavesReport sequential;
   GuidedPairingReport guided;
+  ViewGraphBridgingReport bridging;
 };
 
 struct MatchReport {

@@ -90,26 +90,12 @@ void MatchVocabTreeGuided(Database& database, const std::vector<image_t>& ordere
   };
   Timer timer;
   if (options.vocab_include_sequential) {
-    // Sequential neighbours in waves of growing frame distance: frame i is paired with i + d
-    // only while (i, i + d - 1) verified, so the window stops where frames stop overlapping
-    // (the guided rounds find whatever lies beyond).
-    const int initial_frames = options.sequential.num_initial_frames;
-    std::vector<bool> open(n, true);
-    for (int d = 1; d < n; ++d) {
-      std::vector<ImagePair> wave;
-      std::vector<int> from;
-      for (int i = 0; i + d < n; ++i) {
-        const int window =
-            i < initial_frames ? options.sequential.initial_overlap : options.sequential.overlap;
-        if (!open[i] || d > window) continue;
-        wave.emplace_back(ordered_ids[i], ordered_ids[i + d]);
-        from.push_back(i);
-      }
-      if (wave.empty()) break;
-      const std::vector<bool> ok = matcher.Match(wave, report);
-      record(wave, ok);
-      for (size_t k = 0; k < wave.size(); ++k) open[from[k]] = ok[k];
-    }
+    auto verify = [&](const std::vector<ImagePair>& pairs) { return matcher.Match(pairs, report); };
+    report->vocab.sequential =
+        RunSequentialWaves(ordered_ids, options.sequential, options.sequential_waves, verify, &tried, &verified);
+    const auto& seq = report->vocab.sequential;
+    spdlog::info("vocabtree: sequential waves {} pairs ({} verified), of which quadratic steps {} ({} verified)",
+                 seq.num_tried, seq.num_verified, seq.num_quadratic_tried, seq.num_quadratic_verified);
   }
   // Pairs stored by earlier runs (any strategy) count as tried.
   for (const ImagePair& pair : database.ReadAllMatchedPairs()) {
@@ -164,7 +150,10 @@ void MatchVocabTreeGuided(Database& database, const std::vector<image_t>& ordere
     match_seconds += match_timer.ElapsedSeconds();
     return ok;
   };
-  report->vocab.guided = RunGuidedPairing(scores, ordered_ids, options.guided, verify, &tried, &verified);
+  GuidedPairingOptions guided = options.guided;
+  // Score proposals leave the sequential window to the sequential part.
+  if (options.vocab_include_sequential) guided.min_frame_gap = std::max(guided.min_frame_gap, options.sequential.overlap);
+  report->vocab.guided = RunGuidedPairing(scores, ordered_ids, guided, verify, &tried, &verified);
   report->vocab.match_seconds += match_seconds;
   report->vocab.propose_seconds = rounds_timer.ElapsedSeconds() - match_seconds;
   for (size_t r = 0; r < report->vocab.guided.rounds.size(); ++r) {
@@ -172,6 +161,18 @@ void MatchVocabTreeGuided(Database& database, const std::vector<image_t>& ordere
     spdlog::info("vocabtree round {}: {} by score ({} verified), {} by region growing ({} verified)",
                  r + 1, round.num_from_scores, round.num_verified_from_scores,
                  round.num_from_growing, round.num_verified - round.num_verified_from_scores);
+  }
+  if (options.vocab_bridging) {
+    Timer bridging_timer;
+    const double match_before = match_seconds;
+    report->vocab.bridging = BridgeViewGraph(scores, ordered_ids, options.bridging, verify, &tried, &verified);
+    report->vocab.match_seconds += match_seconds - match_before;
+    report->vocab.propose_seconds += bridging_timer.ElapsedSeconds() - (match_seconds - match_before);
+    const auto& b = report->vocab.bridging;
+    spdlog::info("vocabtree: view graph {} component(s), largest {} of {} frames; bridging tried {} "
+                 "pairs ({} verified) in {} rounds: {} component(s), largest {}",
+                 b.num_components_before, b.largest_component_before, n, b.num_tried, b.num_verified,
+                 b.num_rounds, b.num_components_after, b.largest_component_after);
   }
 
   if (options.write_matrix_images) {
