@@ -81,13 +81,6 @@ void MatchVocabTreeGuided(Database& database, const std::vector<image_t>& ordere
   std::unordered_map<image_t, int> index_of;
   for (int i = 0; i < n; ++i) index_of[ordered_ids[i]] = i;
   BoolMatrix tried = BoolMatrix::Constant(n, n, false), verified = tried;
-  auto record = [&](const std::vector<ImagePair>& pairs, const std::vector<bool>& ok) {
-    for (size_t k = 0; k < pairs.size(); ++k) {
-      const int i = index_of.at(pairs[k].image_id1), j = index_of.at(pairs[k].image_id2);
-      tried(i, j) = tried(j, i) = true;
-      verified(i, j) = verified(j, i) = ok[k];
-    }
-  };
   Timer timer;
   if (options.vocab_include_sequential) {
     auto verify = [&](const std::vector<ImagePair>& pairs) { return matcher.Match(pairs, report); };
