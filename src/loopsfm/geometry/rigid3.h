@@ -40,7 +40,26 @@ struct Sim3d {
   Eigen::Vector3d operator*(const Eigen::Vector3d& x) const {
     return scale * (rotation * x) + translation;
   }
+  // b_from_a -> a_from_b.
+  Sim3d Inverse() const {
+    Sim3d inverse;
+    inverse.scale = 1.0 / scale;
+    inverse.rotation = rotation.inverse();
+    inverse.translation = -(inverse.scale * (inverse.rotation * translation));
+    return inverse;
+  }
 };
+
+// A camera pose after its world was moved by new_from_old: the camera frame is scaled with
+// the world, so the camera sees the moved points where it saw the old ones.
+inline Rigid3d TransformCamFromWorld(const Rigid3d& cam_from_old_world, const Sim3d& new_from_old) {
+  // x_cam = R x_old + t and x_old = R_s^T (x_new - t_s) / s: after scaling the camera
+  // frame by s, R' = R R_s^T and t' = s t - R' t_s.
+  const Eigen::Quaterniond rotation =
+      (cam_from_old_world.rotation * new_from_old.rotation.inverse()).normalized();
+  return Rigid3d(rotation, new_from_old.scale * cam_from_old_world.translation -
+                               rotation * new_from_old.translation);
+}
 
 // Angle of a rotation in degrees, in [0, 180].
 inline double RotationAngleDegrees(const Eigen::Quaterniond& q) {

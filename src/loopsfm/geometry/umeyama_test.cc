@@ -46,6 +46,19 @@ TEST(Umeyama, RecoversAKnownSim3Exactly) {
   }
 }
 
+TEST(Sim3d, InverseUndoesTheTransform) {
+  Random random(13);
+  Sim3d b_from_a;
+  b_from_a.scale = 3.7;
+  b_from_a.rotation = RandomRotation(random);
+  b_from_a.translation = Eigen::Vector3d(4, -1, 2);
+  const Sim3d a_from_b = b_from_a.Inverse();
+  for (const Eigen::Vector3d& x : RandomPoints(random, 20, 10.0)) {
+    EXPECT_LT((a_from_b * (b_from_a * x) - x).norm(), 1e-12 * (1 + x.norm()));
+  }
+  EXPECT_NEAR(a_from_b.scale * b_from_a.scale, 1.0, 1e-15);
+}
+
 TEST(Umeyama, RigidVariantKeepsScaleOne) {
   Random random(12);
   const Rigid3d truth(RandomRotation(random), Eigen::Vector3d(1, -2, 3));

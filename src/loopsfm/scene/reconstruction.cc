@@ -156,14 +156,7 @@ double Reconstruction::ComputeMeanObservationsPerRegImage() const {
 
 void Reconstruction::Transform(const Sim3d& new_from_old) {
   for (auto& [id, image] : images_) {
-    if (!image.registered) continue;
-    // x_cam = R (x_old) + t and x_old = R_s^T (x_new - t_s) / s:
-    // new pose has R' = R R_s^T and t' = s t - R' t_s, up to the scale of the camera frame.
-    Rigid3d& pose = image.cam_from_world;
-    const Eigen::Quaterniond rotation = (pose.rotation * new_from_old.rotation.inverse()).normalized();
-    const Eigen::Vector3d translation =
-        new_from_old.scale * pose.translation - rotation * new_from_old.translation;
-    pose = Rigid3d(rotation, translation);
+    if (image.registered) image.cam_from_world = TransformCamFromWorld(image.cam_from_world, new_from_old);
   }
   for (auto& [id, point] : points3D_) point.xyz = new_from_old * point.xyz;
 }

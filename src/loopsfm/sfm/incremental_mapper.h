@@ -1,10 +1,21 @@
 #pragma once
-// Incremental Structure-from-Motion over tracks: a two-view start, then one frame at a time
-// registered from 2D-3D correspondences (P3P in LO-RANSAC, pose refinement), tracks
-// triangulated as soon as two registered frames see them, local bundle adjustment after
-// each registration and global bundle adjustment (with re-triangulation and outlier
-// filtering) whenever the model has grown by a set fraction. Frames that no model can take
-// start a new model, so a scene that breaks apart gives several models.
+// Incremental Structure-from-Motion over tracks.
+//
+// - Initialisation by quality: candidate pairs are ranked by their well-conditioned inliers
+//   (triangulation angle above a threshold, not explained by a homography); the two-view
+//   model is validated (enough points after a bundle) before it grows, and the next
+//   candidate is tried when it fails.
+// - Growing: one frame at a time registered from 2D-3D correspondences (P3P in LO-RANSAC,
+//   pose refinement), tracks triangulated as soon as two registered frames see them (a
+//   track may hold several points, see mapper_state.h), local bundle adjustment after each
+//   registration and global bundle adjustment (with re-triangulation, point merging and
+//   filtering) whenever the model has grown by a set fraction. A frame that fails to
+//   register is tried again once the model sees more of it or after a global bundle.
+// - Several models: frames no model can take start a new one. A model may register frames
+//   of an earlier one; models linked by such shared frames or by common tracks are merged
+//   through a similarity estimated robustly from their common points, then bundle adjusted
+//   (model_merger.h). A grown model too small to keep is discarded and its frames stay
+//   free for later models. Only what has no link stays a separate model.
 
 #include <vector>
 
@@ -15,19 +26,27 @@
 namespace loopsfm {
 
 struct IncrementalMapperOptions {
-  // Initial pair: fewest inlier matches.
+  // Initial pair: fewest inlier matches (pairs with half as many are tried when no pair
+  // with this many gives a valid start).
   int init_min_num_inliers = 100;
   // Initial pair: largest fraction of its inliers a homography may explain (planar scenes
-  // and pure rotations make poor starts).
+  // and pure rotations make poor starts; they are tried last).
   double init_max_h_inlier_ratio = 0.5;
-  // Initial pair: smallest median triangulation angle, degrees.
+  // Initial pair: an inlier is well conditioned when its two-view triangulation angle is
+  // at least this (degrees); pairs are ranked by their number of well-conditioned inliers.
   double init_min_tri_angle_deg = 3.0;
+  // Initial pair: the two-view model must keep this many points after its bundle
+  // adjustment and filtering (half for the relaxed candidates).
+  int init_min_num_points = 100;
+  // Initial pairs tried, at most, for one model.
+  int init_max_trials = 50;
   // Registration: inlier threshold in pixels and fewest inliers / inlier ratio.
   double abs_pose_max_error_px = 8.0;
   int abs_pose_min_num_inliers = 30;
   double abs_pose_min_inlier_ratio = 0.25;
-  // Tries to register one frame per model before giving up on it.
-  int max_registration_trials = 2;
+  // A frame that failed to register is tried again once it sees this factor more of the
+  // model's tracks, or after the next global bundle adjustment.
+  double registration_retry_growth = 1.2;
   // Triangulation and filtering: reprojection error in pixels, angle in degrees.
   double max_reproj_error_px = 4.0;
   double min_tri_angle_deg = 1.5;
@@ -42,6 +61,11 @@ struct IncrementalMapperOptions {
   // Stop after this many models; models smaller than min_model_size frames are discarded.
   int max_num_models = 10;
   int min_model_size = 3;
+  // Model merging: common tracks whose points agree after the similarity, within this
+  // reprojection error (pixels, in both models), at least this many and this fraction.
+  double merge_max_reproj_error_px = 8.0;
+  int merge_min_num_inliers = 30;
+  double merge_min_inlier_ratio = 0.3;
   // Worker threads for bundle adjustment (0: all cores).
   int num_threads = 0;
   uint64_t seed = kDefaultRandomSeed;
@@ -51,12 +75,23 @@ struct IncrementalMapperOptions {
 struct MapperReport {
   int num_models = 0;
   int num_registered = 0;
+  // Initial pairs tried (two-view models built) and those that passed validation.
+  int num_init_trials = 0;
+  int num_init_accepted = 0;
+  // Registrations that succeeded on a later try, after failing before.
+  int num_registered_on_retry = 0;
+  // Models merged into another, and grown models discarded as too small.
+  int num_models_merged = 0;
+  int num_models_discarded = 0;
   int num_local_ba = 0;
   int num_global_ba = 0;
+  // Bundle adjustments whose solver failed (the model kept its previous state).
+  int num_failed_bundles = 0;
   double seconds_registration = 0.0;
   double seconds_triangulation = 0.0;
   double seconds_local_ba = 0.0;
   double seconds_global_ba = 0.0;
+  double seconds_merging = 0.0;
 };
 
 // Called after each registration with (registered in this model, frames in all).

@@ -2,8 +2,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 
-#include "loopsfm/geometry/pose_checks.h"
 #include "loopsfm/geometry/triangulation.h"
 #include "loopsfm/util/errors.h"
 
@@ -35,14 +35,27 @@ int MapperState::TrackOf(image_t image_id, point2D_t idx) const {
   return track_of_.at(image_id)[idx];
 }
 
-point3D_t MapperState::PointOfTrack(int track) const {
+int MapperState::TrackOfPoint(point3D_t point3D_id) const {
+  const TrackElement& first = reconstruction_.GetPoint3D(point3D_id).track.elements.front();
+  return TrackOf(first.image_id, first.point2D_idx);
+}
+
+std::vector<point3D_t> MapperState::PointsOfTrack(int track) const {
+  std::vector<point3D_t> points;
   for (const TrackElement& el : input_.tracks[track].elements) {
     const Image& image = reconstruction_.GetImage(el.image_id);
-    if (image.registered && image.points2D[el.point2D_idx].HasPoint3D()) {
-      return image.points2D[el.point2D_idx].point3D_id;
+    if (!image.registered) continue;
+    const point3D_t id = image.points2D[el.point2D_idx].point3D_id;
+    if (id != kInvalidPoint3DId && std::find(points.begin(), points.end(), id) == points.end()) {
+      points.push_back(id);
     }
   }
-  return kInvalidPoint3DId;
+  return points;
+}
+
+void MapperState::SetGauge(image_t first, image_t second) {
+  gauge1_ = first;
+  gauge2_ = second;
 }
 
 double MapperState::MaxAngularErrorRad(camera_t camera_id) const {
@@ -50,87 +63,154 @@ double MapperState::MaxAngularErrorRad(camera_t camera_id) const {
                    reconstruction_.GetCamera(camera_id).MeanFocalLength());
 }
 
-bool MapperState::ObservationFits(const Eigen::Vector3d& xyz, const TrackElement& el) const {
+double MapperState::ReprojectionErrorPx(const Eigen::Vector3d& xyz, const TrackElement& el) const {
   const Image& image = reconstruction_.GetImage(el.image_id);
   const Eigen::Vector3d in_cam = image.cam_from_world * xyz;
-  if (in_cam.z() <= 1e-9) return false;
+  if (in_cam.z() <= 1e-9) return std::numeric_limits<double>::infinity();
   const Eigen::Vector2d projected = reconstruction_.GetCamera(image.camera_id).ImgFromCam(in_cam);
-  return (projected - image.points2D[el.point2D_idx].xy).norm() <= options_.max_reproj_error_px;
+  return (projected - image.points2D[el.point2D_idx].xy).norm();
+}
+
+bool MapperState::ObservationFits(const Eigen::Vector3d& xyz, const TrackElement& el) const {
+  return ReprojectionErrorPx(xyz, el) <= options_.max_reproj_error_px;
 }
 
 size_t MapperState::TriangulateTrack(int track) {
-  std::vector<TrackElement> registered;
+  std::vector<TrackElement> free;
+  size_t num_registered = 0;
   for (const TrackElement& el : input_.tracks[track].elements) {
-    if (reconstruction_.IsRegistered(el.image_id)) registered.push_back(el);
+    const Image& image = reconstruction_.GetImage(el.image_id);
+    if (!image.registered) continue;
+    ++num_registered;
+    if (!image.points2D[el.point2D_idx].HasPoint3D()) free.push_back(el);
   }
-  if (registered.size() < 2) return 0;
+  if (free.empty() || num_registered < 2) return 0;
 
-  const point3D_t existing = PointOfTrack(track);
-  if (existing != kInvalidPoint3DId) {
-    size_t added = 0;
-    const Eigen::Vector3d xyz = reconstruction_.GetPoint3D(existing).xyz;
-    for (const TrackElement& el : registered) {
-      const Point2D& p = reconstruction_.GetImage(el.image_id).points2D[el.point2D_idx];
-      if (!p.HasPoint3D() && ObservationFits(xyz, el)) {
-        reconstruction_.AddObservation(existing, el);
-        ++added;
+  // Each free observation joins the point of its track it fits best.
+  const std::vector<point3D_t> points = PointsOfTrack(track);
+  size_t added = 0;
+  std::vector<TrackElement> unassigned;
+  for (const TrackElement& el : free) {
+    point3D_t best = kInvalidPoint3DId;
+    double best_error = options_.max_reproj_error_px;
+    for (point3D_t id : points) {
+      const double error = ReprojectionErrorPx(reconstruction_.GetPoint3D(id).xyz, el);
+      if (error <= best_error) {
+        best = id;
+        best_error = error;
       }
     }
-    return added;
+    if (best != kInvalidPoint3DId) {
+      reconstruction_.AddObservation(best, el);
+      ++added;
+    } else {
+      unassigned.push_back(el);
+    }
   }
+  // The rest start points of their own.
+  if (unassigned.size() >= 2) added += TriangulateNewPoints(std::move(unassigned));
+  if (added > 0) MergePointsOfTrack(track);
+  return added;
+}
 
-  // New point: triangulate from all registered views; when an outlier view spoils that,
-  // take the two-view solution that most views agree with and re-triangulate from those.
-  std::vector<Matrix3x4d> poses;
-  std::vector<Eigen::Vector2d> normalized;
-  double max_angular_error = 0.0;
-  for (const TrackElement& el : registered) {
-    const Image& image = reconstruction_.GetImage(el.image_id);
-    poses.push_back(image.cam_from_world.ToMatrix());
-    normalized.push_back(
-        reconstruction_.GetCamera(image.camera_id).CamFromImg(image.points2D[el.point2D_idx].xy));
-    max_angular_error = std::max(max_angular_error, MaxAngularErrorRad(image.camera_id));
-  }
+size_t MapperState::TriangulateNewPoints(std::vector<TrackElement> elements) {
   TriangulationOptions tri_options;
   tri_options.min_tri_angle_deg = options_.min_tri_angle_deg;
-  tri_options.max_angular_error_deg = max_angular_error * 180.0 / M_PI;
-  TriangulationReport result = TriangulateMultiViewChecked(poses, normalized, tri_options);
-  std::vector<TrackElement> inliers = registered;
-  if (result.status == TriangulationStatus::kLargeError && registered.size() > 2) {
-    size_t best_count = 0;
-    const size_t n = std::min<size_t>(registered.size(), 12);
-    for (size_t i = 0; i < n; ++i) {
-      for (size_t j = i + 1; j < n; ++j) {
-        const std::array<Matrix3x4d, 2> pair_poses = {poses[i], poses[j]};
-        const std::array<Eigen::Vector2d, 2> pair_points = {normalized[i], normalized[j]};
-        const TriangulationReport two = TriangulateMultiViewChecked(pair_poses, pair_points, tri_options);
-        if (!two.success()) continue;
-        std::vector<TrackElement> agreeing;
-        for (const TrackElement& el : registered) {
-          if (ObservationFits(two.point3D_in_world, el)) agreeing.push_back(el);
-        }
-        if (agreeing.size() > best_count) {
-          best_count = agreeing.size();
-          inliers = std::move(agreeing);
-        }
-      }
-    }
-    if (best_count < 2) return 0;
-    poses.clear();
-    normalized.clear();
-    for (const TrackElement& el : inliers) {
+  size_t added = 0;
+  // A few rounds: each takes the largest set of observations one position explains.
+  for (int round = 0; round < 3 && elements.size() >= 2; ++round) {
+    std::vector<Matrix3x4d> poses;
+    std::vector<Eigen::Vector2d> normalized;
+    double max_angular_error = 0.0;
+    for (const TrackElement& el : elements) {
       const Image& image = reconstruction_.GetImage(el.image_id);
       poses.push_back(image.cam_from_world.ToMatrix());
-      normalized.push_back(reconstruction_.GetCamera(image.camera_id)
-                               .CamFromImg(image.points2D[el.point2D_idx].xy));
+      normalized.push_back(
+          reconstruction_.GetCamera(image.camera_id).CamFromImg(image.points2D[el.point2D_idx].xy));
+      max_angular_error = std::max(max_angular_error, MaxAngularErrorRad(image.camera_id));
     }
-    result = TriangulateMultiViewChecked(poses, normalized, tri_options);
+    tri_options.max_angular_error_deg = max_angular_error * 180.0 / M_PI;
+    TriangulationReport result = TriangulateMultiViewChecked(poses, normalized, tri_options);
+    std::vector<TrackElement> inliers = elements;
+    if (!result.success() && elements.size() > 2) {
+      // An outlier view spoils the joint solution: take the two-view solution most views
+      // agree with and re-triangulate from those.
+      size_t best_count = 0;
+      const size_t n = std::min<size_t>(elements.size(), 12);
+      for (size_t i = 0; i < n; ++i) {
+        for (size_t j = i + 1; j < n; ++j) {
+          const std::array<Matrix3x4d, 2> pair_poses = {poses[i], poses[j]};
+          const std::array<Eigen::Vector2d, 2> pair_points = {normalized[i], normalized[j]};
+          const TriangulationReport two = TriangulateMultiViewChecked(pair_poses, pair_points, tri_options);
+          if (!two.success()) continue;
+          std::vector<TrackElement> agreeing;
+          for (const TrackElement& el : elements) {
+            if (ObservationFits(two.point3D_in_world, el)) agreeing.push_back(el);
+          }
+          if (agreeing.size() > best_count) {
+            best_count = agreeing.size();
+            inliers = std::move(agreeing);
+          }
+        }
+      }
+      if (best_count < 2) break;
+      std::vector<Matrix3x4d> inlier_poses;
+      std::vector<Eigen::Vector2d> inlier_points;
+      for (const TrackElement& el : inliers) {
+        const size_t k = std::find(elements.begin(), elements.end(), el) - elements.begin();
+        inlier_poses.push_back(poses[k]);
+        inlier_points.push_back(normalized[k]);
+      }
+      result = TriangulateMultiViewChecked(inlier_poses, inlier_points, tri_options);
+    }
+    if (!result.success()) break;
+    // The angular test is looser than the pixel one away from the image centre.
+    std::erase_if(inliers, [&](const TrackElement& el) { return !ObservationFits(result.point3D_in_world, el); });
+    if (inliers.size() < 2) break;
+    Track track_in_model;
+    track_in_model.elements = inliers;
+    reconstruction_.AddPoint3D(result.point3D_in_world, track_in_model);
+    added += inliers.size();
+    std::erase_if(elements, [&](const TrackElement& el) {
+      return std::find(inliers.begin(), inliers.end(), el) != inliers.end();
+    });
   }
-  if (!result.success()) return 0;
-  Track track_in_model;
-  track_in_model.elements = inliers;
-  reconstruction_.AddPoint3D(result.point3D_in_world, track_in_model);
-  return inliers.size();
+  return added;
+}
+
+void MapperState::MergePointsOfTrack(int track) {
+  TriangulationOptions tri_options;
+  tri_options.min_tri_angle_deg = 0.0;
+  tri_options.max_angular_error_deg = 90.0;  // checked below in pixels
+  bool merged = true;
+  while (merged) {
+    merged = false;
+    const std::vector<point3D_t> points = PointsOfTrack(track);
+    for (size_t a = 0; a < points.size() && !merged; ++a) {
+      for (size_t b = a + 1; b < points.size() && !merged; ++b) {
+        std::vector<TrackElement> elements = reconstruction_.GetPoint3D(points[a]).track.elements;
+        const auto& more = reconstruction_.GetPoint3D(points[b]).track.elements;
+        elements.insert(elements.end(), more.begin(), more.end());
+        std::vector<Matrix3x4d> poses;
+        std::vector<Eigen::Vector2d> normalized;
+        for (const TrackElement& el : elements) {
+          const Image& image = reconstruction_.GetImage(el.image_id);
+          poses.push_back(image.cam_from_world.ToMatrix());
+          normalized.push_back(reconstruction_.GetCamera(image.camera_id)
+                                   .CamFromImg(image.points2D[el.point2D_idx].xy));
+        }
+        const TriangulationReport result = TriangulateMultiViewChecked(poses, normalized, tri_options);
+        if (!result.success()) continue;
+        const bool all_fit = std::all_of(elements.begin(), elements.end(), [&](const TrackElement& el) {
+          return ObservationFits(result.point3D_in_world, el);
+        });
+        if (!all_fit) continue;
+        const point3D_t id = reconstruction_.MergePoints3D(points[a], points[b]);
+        reconstruction_.GetPoint3D(id).xyz = result.point3D_in_world;
+        merged = true;
+      }
+    }
+  }
 }
 
 size_t MapperState::TriangulateImage(image_t image_id) {
@@ -143,7 +223,12 @@ size_t MapperState::TriangulateImage(image_t image_id) {
 
 size_t MapperState::RetriangulateAll() {
   size_t added = 0;
-  for (size_t t = 0; t < input_.tracks.size(); ++t) added += TriangulateTrack(static_cast<int>(t));
+  for (size_t t = 0; t < input_.tracks.size(); ++t) {
+    const int track = static_cast<int>(t);
+    added += TriangulateTrack(track);
+    // Positions moved in the bundle: points that disagreed before may agree now.
+    MergePointsOfTrack(track);
+  }
   return added;
 }
 
@@ -184,12 +269,13 @@ size_t MapperState::FilterPoints(const std::vector<point3D_t>& point_ids) {
   return removed;
 }
 
-std::unordered_map<image_t, size_t> MapperState::CountVisiblePoints() const {
+std::unordered_map<image_t, size_t> MapperState::CountVisibleTracks() const {
   std::unordered_map<image_t, size_t> counts;
+  std::vector<char> seen(input_.tracks.size(), 0);
   for (const auto& [id, point] : reconstruction_.Points3D()) {
-    const TrackElement& first = point.track.elements.front();
-    const int track = TrackOf(first.image_id, first.point2D_idx);
-    if (track < 0) continue;
+    const int track = TrackOfPoint(id);
+    if (track < 0 || seen[track]) continue;
+    seen[track] = 1;
     for (const TrackElement& el : input_.tracks[track].elements) {
       if (!reconstruction_.IsRegistered(el.image_id)) ++counts[el.image_id];
     }

@@ -1,13 +1,19 @@
 #pragma once
-// Internal state of the incremental mapper for one model: the reconstruction being grown,
-// and the link from every keypoint to its track. A 3D point is always made from one track,
-// so a track's point is found through any registered observation of it; nothing is cached
-// that could go stale when points are deleted.
+// One model of the incremental mapper: the reconstruction being grown, the link from every
+// keypoint to its track, and the steps that grow and refine it (registration, triangulation,
+// point merging and filtering, local and global bundle adjustment).
+//
+// A track may hold several 3D points: where an observation does not fit the track's point
+// (at a loop closure, the recent end of a long track disagrees with the old one by the
+// drift), it starts or joins another point of the same track instead of being dropped, and
+// points of one track are merged again once their observations agree. A point's track is
+// found through any of its observations, so nothing is cached that could go stale when
+// points are deleted.
 
 #include <unordered_map>
-#include <unordered_set>
 #include <vector>
 
+#include "loopsfm/math/random.h"
 #include "loopsfm/scene/reconstruction.h"
 #include "loopsfm/sfm/incremental_mapper.h"
 
@@ -18,29 +24,58 @@ class MapperState {
   MapperState(const MapperInput& input, const IncrementalMapperOptions& options);
 
   Reconstruction& reconstruction() { return reconstruction_; }
+  const Reconstruction& reconstruction() const { return reconstruction_; }
   const MapperInput& input() const { return input_; }
   const IncrementalMapperOptions& options() const { return options_; }
 
   // Track of keypoint idx of an image, or -1.
   int TrackOf(image_t image_id, point2D_t idx) const;
-  // The 3D point made from track t, or kInvalidPoint3DId.
-  point3D_t PointOfTrack(int track) const;
+  // The original track a 3D point was made from.
+  int TrackOfPoint(point3D_t point3D_id) const;
+  // The 3D points made from track t (none, one, or several when parts of it disagree).
+  std::vector<point3D_t> PointsOfTrack(int track) const;
 
-  // Triangulates or extends every track seen by the image (after it was registered).
-  // Returns the number of observations added.
+  // The two frames that fix the gauge (the initial pair): the first pose constant, one
+  // translation coordinate of the second constant.
+  void SetGauge(image_t first, image_t second);
+  image_t GaugeFirst() const { return gauge1_; }
+  image_t GaugeSecond() const { return gauge2_; }
+
+  // --- Structure ---------------------------------------------------------------------
+  // Triangulates, extends or merges every track seen by the image (after it was
+  // registered). Returns the number of observations added.
   size_t TriangulateImage(image_t image_id);
-  // Same over all tracks with at least two registered observations (after global BA).
+  // Same over all tracks (after a global bundle adjustment).
   size_t RetriangulateAll();
   // Deletes observations with a large reprojection error or behind the camera, then points
   // with a small triangulation angle. Over the given points, or all when empty.
   size_t FilterPoints(const std::vector<point3D_t>& point_ids);
+  // For every image not registered here: how many tracks with a 3D point it sees.
+  std::unordered_map<image_t, size_t> CountVisibleTracks() const;
+  // Reprojection error in pixels of a position in the image of an observation; infinity
+  // behind the camera.
+  double ReprojectionErrorPx(const Eigen::Vector3d& xyz, const TrackElement& element) const;
 
-  // For every unregistered image: how many of its keypoints see an existing 3D point.
-  std::unordered_map<image_t, size_t> CountVisiblePoints() const;
+  // --- Registration and refinement (mapper_steps.cc) -----------------------------------
+  // Registers an image from its 2D-3D correspondences (P3P in LO-RANSAC, pose refinement).
+  // Returns false, leaving the model unchanged, when too few correspondences fit.
+  bool RegisterImage(image_t image_id, Random& random, MapperReport* report);
+  // Bundle over the image and the frames sharing most points with it, then filtering of
+  // the points involved. Returns false when the solver failed (the model is unchanged).
+  bool LocalBundle(image_t image_id, MapperReport* report);
+  // Bundle over all registered frames. Returns false when the solver failed.
+  bool GlobalBundle(MapperReport* report);
+  // Global bundle, re-triangulation and merging of all tracks, filtering, and a second
+  // bundle when those changed much.
+  void GlobalRefinement(MapperReport* report);
 
  private:
-  // Triangulates or extends one track; returns observations added.
+  // Triangulates, extends or merges one track; returns observations added.
   size_t TriangulateTrack(int track);
+  // Starts new points from observations of a track that fit none of its points.
+  size_t TriangulateNewPoints(std::vector<TrackElement> elements);
+  // Merges points of one track when all their observations fit one position.
+  void MergePointsOfTrack(int track);
   bool ObservationFits(const Eigen::Vector3d& xyz, const TrackElement& element) const;
   double MaxAngularErrorRad(camera_t camera_id) const;
 
@@ -49,6 +84,7 @@ class MapperState {
   Reconstruction reconstruction_;
   // track_of_[image_id][point2D_idx] = track index or -1.
   std::unordered_map<image_t, std::vector<int>> track_of_;
+  image_t gauge1_ = kInvalidImageId, gauge2_ = kInvalidImageId;
 };
 
 }  // namespace loopsfm

@@ -1,0 +1,108 @@
+#include "loopsfm/sfm/incremental_mapper.h"
+
+#include <gtest/gtest.h>
+
+#include "loopsfm/sfm/sfm_test_problem.h"
+
+namespace loopsfm {
+namespace {
+
+using testing::ComparePoses;
+using testing::MakeMapperProblem;
+using testing::MapperProblem;
+using testing::MapperProblemOptions;
+
+TEST(IncrementalMapper, RegistersAWalkInOneAccurateModel) {
+  const MapperProblem p = MakeMapperProblem({});
+  IncrementalMapperOptions options;
+  options.num_threads = 1;
+  MapperReport report;
+  const auto models = RunIncrementalMapper(p.input, options, &report);
+  ASSERT_EQ(models.size(), 1u);
+  const auto error = ComparePoses(models[0], p);
+  EXPECT_EQ(error.num_registered, 30);
+  EXPECT_LT(error.max_centre_error, 2e-3);
+  EXPECT_LT(error.max_rotation_deg, 0.2);
+  EXPECT_EQ(report.num_failed_bundles, 0);
+  EXPECT_EQ(report.num_init_accepted, 1);
+}
+
+// The last frame also holds 1500 clutter keypoints wrongly linked (by panoramic pairs,
+// which no initial pair can use) to points only the first three frames see. The model
+// starts at the beginning of the walk (the wall is richer there), where the last frame
+// seems to see many of its points, but too few of them fit for a pose. It must not be
+// given up: once the model reaches it, it registers at its true pose.
+TEST(IncrementalMapper, RetriesAFrameThatFailedOnceTheModelSeesMoreOfIt) {
+  MapperProblemOptions problem_options;
+  problem_options.extra_points_at_start = 1500;
+  MapperProblem p = MakeMapperProblem(problem_options);
+  Random random(5);
+  const int target = problem_options.num_frames - 1;
+  MapperFrame& frame = p.input.frames[target];
+  std::vector<bool> used(p.points.size(), false);
+  for (int point : p.keypoint_point[target]) used[point] = true;
+  const size_t num_real = frame.points2D.size();
+  for (int source = 0; source < 3; ++source) {
+    MapperPair clutter;
+    clutter.pair = ImagePair(p.input.frames[source].image_id, frame.image_id);
+    clutter.geometry.config = TwoViewGeometry::kPanoramic;
+    for (size_t k = 0; k < p.keypoint_point[source].size(); ++k) {
+      const int point = p.keypoint_point[source][k];
+      if (used[point] || clutter.geometry.inlier_matches.size() >= 500) continue;
+      used[point] = true;
+      clutter.geometry.inlier_matches.push_back(
+          {static_cast<point2D_t>(k), static_cast<point2D_t>(frame.points2D.size())});
+      frame.points2D.emplace_back(random.UniformReal(0, 640), random.UniformReal(0, 480));
+      p.keypoint_point[target].push_back(-1);
+    }
+    p.input.pairs.push_back(clutter);
+  }
+  ASSERT_EQ(frame.points2D.size(), num_real + 1500);
+  testing::RebuildTracks(&p.input);
+
+  IncrementalMapperOptions options;
+  options.num_threads = 1;
+  MapperReport report;
+  const auto models = RunIncrementalMapper(p.input, options, &report);
+  ASSERT_EQ(models.size(), 1u);
+  EXPECT_TRUE(models[0].IsRegistered(frame.image_id));
+  EXPECT_GE(report.num_registered_on_retry, 1);
+  const auto error = ComparePoses(models[0], p);
+  EXPECT_EQ(error.num_registered, 30);
+  EXPECT_LT(error.max_centre_error, 2e-3);
+}
+
+// Two walks that share no verified pair at first: the mapper builds two models. A few
+// pairs between their ends link them; the models must come out merged into one.
+TEST(IncrementalMapper, MergesModelsLinkedByVerifiedPairs) {
+  MapperProblemOptions problem_options;
+  problem_options.num_frames = 40;
+  MapperProblem p = MakeMapperProblem(problem_options);
+  // Cut the video between frames 19 and 20 except for pairs (18, 21) and (19, 22) ...
+  std::erase_if(p.input.pairs, [&](const MapperPair& pair) {
+    const int a = static_cast<int>(pair.pair.image_id1) - 1, b = static_cast<int>(pair.pair.image_id2) - 1;
+    return (a < 20) != (b < 20);
+  });
+  testing::RebuildTracks(&p.input);
+  IncrementalMapperOptions options;
+  options.num_threads = 1;
+  {
+    MapperReport report;
+    const auto models = RunIncrementalMapper(p.input, options, &report);
+    EXPECT_EQ(models.size(), 2u) << "the cut must separate the walk";
+  }
+  // ... now link them with two pairs across the cut: too few tracks for either model to
+  // register the other's frames, enough common points for a similarity.
+  p.input.pairs.push_back(testing::MakeTruePair(p, 17, 22));
+  p.input.pairs.push_back(testing::MakeTruePair(p, 18, 23));
+  testing::RebuildTracks(&p.input);
+  MapperReport report;
+  const auto models = RunIncrementalMapper(p.input, options, &report);
+  ASSERT_EQ(models.size(), 1u);
+  const auto error = ComparePoses(models[0], p);
+  EXPECT_EQ(error.num_registered, 40);
+  EXPECT_LT(error.max_centre_error, 2e-3);
+}
+
+}  // namespace
+}  // namespace loopsfm

@@ -1,0 +1,149 @@
+// MapperState's registration and bundle adjustment steps.
+
+#include <algorithm>
+
+#include "loopsfm/estimators/absolute_pose.h"
+#include "loopsfm/estimators/bundle_adjustment.h"
+#include "loopsfm/sfm/mapper_state.h"
+#include "loopsfm/util/logging.h"
+#include "loopsfm/util/timer.h"
+
+namespace loopsfm {
+
+bool MapperState::RegisterImage(image_t image_id, Random& random, MapperReport* report) {
+  Timer timer;
+  const Image& image = reconstruction_.GetImage(image_id);
+  // Every 3D point of the keypoint's track is a candidate: where a track holds several,
+  // RANSAC keeps the one that fits.
+  std::vector<Eigen::Vector2d> points2D;
+  std::vector<Eigen::Vector3d> points3D;
+  for (point2D_t idx = 0; idx < image.points2D.size(); ++idx) {
+    const int track = TrackOf(image_id, idx);
+    if (track < 0) continue;
+    for (point3D_t point : PointsOfTrack(track)) {
+      points2D.push_back(image.points2D[idx].xy);
+      points3D.push_back(reconstruction_.GetPoint3D(point).xyz);
+    }
+  }
+  AbsolutePoseEstimationOptions pose_options;
+  pose_options.max_error_px = options_.abs_pose_max_error_px;
+  pose_options.min_num_inliers = options_.abs_pose_min_num_inliers;
+  const AbsolutePoseReport result = EstimateAbsolutePose(
+      points2D, points3D, reconstruction_.GetCamera(image.camera_id), pose_options, random);
+  report->seconds_registration += timer.ElapsedSeconds();
+  if (!result.success || result.num_inliers < options_.abs_pose_min_num_inliers ||
+      result.num_inliers < options_.abs_pose_min_inlier_ratio * points2D.size()) {
+    spdlog::debug("could not register {}: {} of {} correspondences fit", image.name,
+                  result.num_inliers, points2D.size());
+    return false;
+  }
+  reconstruction_.GetImage(image_id).cam_from_world = result.cam_from_world;
+  reconstruction_.RegisterImage(image_id);
+  return true;
+}
+
+namespace {
+
+void FixGauge(image_t gauge1, image_t gauge2, BundleAdjustmentConfig* config) {
+  if (config->HasImage(gauge1) && config->HasImage(gauge2)) {
+    // The config must also have a constant image when all registered frames are in it.
+    config->SetConstantPose(gauge1);
+    config->SetConstantTranslationCoords(gauge2, {0});
+  } else if (config->HasImage(gauge1)) {
+    config->SetConstantPose(gauge1);
+  }
+}
+
+// Ceres copies the solution into the parameter blocks only when it is usable (solver.cc:
+// StateVectorToParameterBlocks of the original state otherwise), so a failed solve leaves
+// the model as it was.
+bool ReportSolve(BundleAdjuster& adjuster, Reconstruction* reconstruction, const char* what,
+                 MapperReport* report) {
+  if (adjuster.Solve(reconstruction)) return true;
+  ++report->num_failed_bundles;
+  spdlog::warn("{} bundle adjustment failed ({}); the model keeps its previous state", what,
+               adjuster.report().termination);
+  return false;
+}
+
+}  // namespace
+
+bool MapperState::LocalBundle(image_t image_id, MapperReport* report) {
+  Timer timer;
+  // The frames sharing most 3D points with the new one.
+  std::unordered_map<image_t, size_t> shared;
+  for (const Point2D& p : reconstruction_.GetImage(image_id).points2D) {
+    if (!p.HasPoint3D()) continue;
+    for (const TrackElement& el : reconstruction_.GetPoint3D(p.point3D_id).track.elements) {
+      if (el.image_id != image_id) ++shared[el.image_id];
+    }
+  }
+  std::vector<std::pair<size_t, image_t>> ranked;
+  for (const auto& [id, count] : shared) ranked.push_back({count, id});
+  std::sort(ranked.begin(), ranked.end(), std::greater<>());
+  BundleAdjustmentConfig config;
+  config.AddImage(image_id);
+  for (size_t i = 0; i < ranked.size() && i < static_cast<size_t>(options_.local_ba_num_images); ++i) {
+    config.AddImage(ranked[i].second);
+  }
+  FixGauge(gauge1_, gauge2_, &config);
+  for (const auto& [id, camera] : reconstruction_.Cameras()) config.SetConstantCamera(id);
+  BundleAdjustmentOptions ba_options = BundleAdjustmentOptions::Local();
+  ba_options.num_threads = options_.num_threads > 0 ? options_.num_threads : -1;
+  BundleAdjuster adjuster(ba_options, config);
+  const bool ok = ReportSolve(adjuster, &reconstruction_, "local", report);
+  // Points of the local frames may have moved: check them.
+  std::vector<point3D_t> touched;
+  for (image_t id : config.ImageIds()) {
+    for (const Point2D& p : reconstruction_.GetImage(id).points2D) {
+      if (p.HasPoint3D()) touched.push_back(p.point3D_id);
+    }
+  }
+  std::sort(touched.begin(), touched.end());
+  touched.erase(std::unique(touched.begin(), touched.end()), touched.end());
+  FilterPoints(touched);
+  ++report->num_local_ba;
+  report->seconds_local_ba += timer.ElapsedSeconds();
+  return ok;
+}
+
+bool MapperState::GlobalBundle(MapperReport* report) {
+  Timer timer;
+  BundleAdjustmentConfig config;
+  for (image_t id : reconstruction_.RegImageIds()) config.AddImage(id);
+  FixGaugeWithTwoImages(reconstruction_, gauge1_, gauge2_, &config);
+  BundleAdjustmentOptions ba_options = BundleAdjustmentOptions::Global();
+  ba_options.num_threads = options_.num_threads > 0 ? options_.num_threads : -1;
+  bool any_guessed = false;
+  for (const auto& [id, camera] : reconstruction_.Cameras()) {
+    if (camera.has_prior_focal_length || !options_.refine_guessed_focal_length) {
+      if (!options_.refine_extra_params) config.SetConstantCamera(id);
+    } else {
+      any_guessed = true;
+    }
+  }
+  // Focal length is poorly constrained by few frames: refine it once the model has some.
+  ba_options.refine_focal_length = any_guessed && reconstruction_.NumRegImages() >= 5;
+  ba_options.refine_extra_params =
+      options_.refine_extra_params && reconstruction_.NumRegImages() >= 10;
+  BundleAdjuster adjuster(ba_options, config);
+  const bool ok = ReportSolve(adjuster, &reconstruction_, "global", report);
+  ++report->num_global_ba;
+  report->seconds_global_ba += timer.ElapsedSeconds();
+  return ok;
+}
+
+void MapperState::GlobalRefinement(MapperReport* report) {
+  GlobalBundle(report);
+  Timer tri_timer;
+  const size_t added = RetriangulateAll();
+  report->seconds_triangulation += tri_timer.ElapsedSeconds();
+  const size_t removed = FilterPoints({});
+  const size_t observations = reconstruction_.ComputeNumObservations();
+  if (added + removed > 0.02 * observations) {
+    GlobalBundle(report);
+    FilterPoints({});
+  }
+}
+
+}  // namespace loopsfm
