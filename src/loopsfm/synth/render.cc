@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <fstream>
 #include <optional>
 #include <system_error>
 #include <vector>
@@ -67,17 +68,18 @@ void CreateDirectory(const std::filesystem::path& path) {
   }
 }
 
-// True for names SyntheticFrameName makes: frame_NNNNNN.png.
+// True for names SyntheticFrameName makes: frame_NNNNNN.png or frame_NNNNNN.jpg.
 bool IsFrameName(const std::string& name) {
-  if (name.size() != 16 || name.rfind("frame_", 0) != 0 || name.substr(12) != ".png") {
+  if (name.size() != 16 || name.rfind("frame_", 0) != 0 ||
+      (name.substr(12) != ".png" && name.substr(12) != ".jpg")) {
     return false;
   }
   return std::all_of(name.begin() + 6, name.begin() + 12,
                      [](char c) { return c >= '0' && c <= '9'; });
 }
 
-// Removes the frames an earlier run left in the output folder (images/frame_NNNNNN.png and
-// video.mp4), so that the folder always matches its groundtruth.txt.
+// Removes the frames an earlier run left in the output folder (images/frame_NNNNNN.png or
+// .jpg, and video.mp4), so that the folder always matches its groundtruth.txt.
 void RemoveEarlierFrames(const std::filesystem::path& output_dir) {
   std::error_code error;
   std::filesystem::remove(output_dir / "video.mp4", error);
@@ -100,7 +102,8 @@ std::string OpenVideo(const std::filesystem::path& path, const SynthOptions& opt
                      cv::Size(options.width, options.height), true) &&
         writer->isOpened()) {
       // SIFT wants few coding artefacts. Backends that support it honour this; OpenCV 4.6's
-      // FFmpeg backend ignores it and encodes H.264 at CRF 23 (about 36 dB PSNR here).
+      // FFmpeg backend ignores it and encodes H.264 at CRF 23 (about 36 dB PSNR here), so
+      // stronger artefacts come from the JPEG stage (FrameDegradationOptions::jpeg_quality).
       writer->set(cv::VIDEOWRITER_PROP_QUALITY, 100.0);
       return codec;
     }
@@ -175,6 +178,17 @@ cv::Mat RenderFrame(const SyntheticScene& scene, int frame) {
   return image;
 }
 
+cv::Mat RenderDegradedFrame(const SyntheticScene& scene, int frame) {
+  cv::Mat image = RenderFrame(scene, frame);
+  const FrameDegradationOptions& degradation = scene.options.degradation;
+  const bool blurred =
+      std::any_of(degradation.motion_blur.begin(), degradation.motion_blur.end(),
+                  [frame](const BlurRange& blur) { return blur.frames.Contains(frame); });
+  const Eigen::Vector2d motion = blurred ? ImageMotion(scene, frame) : Eigen::Vector2d::Zero();
+  DegradeFrame(degradation, frame, motion, scene.options.seed, &image);
+  return image;
+}
+
 SynthReport RenderSyntheticScene(const SynthOptions& options,
                                  const std::filesystem::path& output_dir,
                                  const SynthProgressCallback& progress) {
@@ -198,13 +212,24 @@ SynthReport RenderSyntheticScene(const SynthOptions& options,
     report.frames = output_dir / "images";
     CreateDirectory(report.frames);
   }
+  const int jpeg_quality = options.degradation.jpeg_quality;
   auto write_frame = [&](const cv::Mat& image, int frame) {
     if (options.video) {
-      video.write(image);
+      video.write(jpeg_quality > 0 ? JpegRoundTrip(image, jpeg_quality) : image);
       return;
     }
-    const std::filesystem::path path = report.frames / SyntheticFrameName(frame);
-    if (!cv::imwrite(path.string(), image)) {
+    const std::filesystem::path path = report.frames / SyntheticFrameName(options, frame);
+    bool written = false;
+    if (jpeg_quality > 0) {
+      const std::vector<uchar> bytes = EncodeJpeg(image, jpeg_quality);
+      std::ofstream file(path, std::ios::binary);
+      file.write(reinterpret_cast<const char*>(bytes.data()),
+                 static_cast<std::streamsize>(bytes.size()));
+      written = static_cast<bool>(file);
+    } else {
+      written = cv::imwrite(path.string(), image);
+    }
+    if (!written) {
       throw StorageError(fmt::format("cannot write image '{}'; check the disk and permissions",
                                      path.string()));
     }
@@ -214,7 +239,7 @@ SynthReport RenderSyntheticScene(const SynthOptions& options,
   tbb::task_group writer;
   for (int frame = 0; frame < scene.NumFrames(); ++frame) {
     const Timer render_timer;
-    cv::Mat image = RenderFrame(scene, frame);
+    cv::Mat image = RenderDegradedFrame(scene, frame);
     report.render_seconds += render_timer.ElapsedSeconds();
     writer.wait();  // rethrows a failed write of the previous frame
     if (frame > 0 && progress) progress(frame, scene.NumFrames());

@@ -2,7 +2,8 @@
 // Rendering synthetic scenes (see synthetic_scene.h) with a CPU ray caster, one frame at a
 // time, to an image folder or a video, with the ground truth beside them:
 //
-//   OUTPUT/images/frame_%06d.png   (or OUTPUT/video.mp4 with SynthOptions::video)
+//   OUTPUT/images/frame_%06d.png   (or OUTPUT/video.mp4 with SynthOptions::video; .jpg with
+//                                   a JPEG quality set)
 //   OUTPUT/groundtruth.txt         name tx ty tz qx qy qz qw per frame, world_from_cam
 //   OUTPUT/intrinsics.txt          PINHOLE width height fx fy cx cy
 
@@ -19,6 +20,11 @@ namespace loopsfm {
 // Renders one frame as an 8-bit BGR image of the camera's size. Rows are rendered in
 // parallel (TBB); the result does not depend on the thread count.
 cv::Mat RenderFrame(const SyntheticScene& scene, int frame);
+
+// RenderFrame with the degradations of scene.options.degradation that cover the frame (motion
+// blur along ImageMotion, low texture, darkness, sensor noise); the JPEG stage is applied when
+// the frame is written. Equals RenderFrame when no degradation is set.
+cv::Mat RenderDegradedFrame(const SyntheticScene& scene, int frame);
 
 struct SynthReport {
   // The output folder.
@@ -40,8 +46,8 @@ struct SynthReport {
 using SynthProgressCallback = std::function<void(int, int)>;
 
 // Renders all frames of the scene chosen by `options` into `output_dir` (created if needed),
-// streaming frames to disk one at a time; frames of an earlier run there (frame_NNNNNN.png,
-// video.mp4) are removed first. Throws InvalidArgument for bad options and StorageError when
+// streaming frames to disk one at a time; frames of an earlier run there (frame_NNNNNN.png or
+// .jpg, video.mp4) are removed first. Throws InvalidArgument for bad options and StorageError when
 // the output cannot be written (or no mp4 encoder is available).
 SynthReport RenderSyntheticScene(const SynthOptions& options,
                                  const std::filesystem::path& output_dir,

@@ -1,5 +1,4 @@
 #include <gtest/gtest.h>
-#include <unistd.h>
 
 #include <algorithm>
 #include <cmath>
@@ -15,55 +14,18 @@
 #include "loopsfm/scene/dataset_files.h"
 #include "loopsfm/synth/noise.h"
 #include "loopsfm/synth/render.h"
+#include "loopsfm/synth/synth_test_util.h"
 #include "loopsfm/synth/synthetic_scene.h"
 #include "loopsfm/util/errors.h"
 
 namespace loopsfm {
 namespace {
 
-SynthOptions SmallOptions(const std::string& scene) {
-  SynthOptions options;
-  options.scene = scene;
-  options.num_frames = 12;
-  options.width = 320;
-  options.height = 240;
-  return options;
-}
-
-// An empty temporary folder (unique to this process), removed at the end of the test.
-class TempDir {
- public:
-  explicit TempDir(const std::string& name)
-      : path_(std::filesystem::temp_directory_path() /
-              ("loopsfm_synth_test_" + std::to_string(::getpid()) + "_" + name)) {
-    std::filesystem::remove_all(path_);
-  }
-  ~TempDir() {
-    std::error_code error;
-    std::filesystem::remove_all(path_, error);
-  }
-  const std::filesystem::path& path() const { return path_; }
-
- private:
-  std::filesystem::path path_;
-};
-
-Eigen::Vector2d Project(const SyntheticScene& scene, int frame, const Eigen::Vector3d& point) {
-  const Eigen::Vector3d in_cam = scene.world_from_cam[frame].Inverse() * point;
-  return scene.camera.ImgFromCam(in_cam);
-}
-
-bool InImage(const SyntheticScene& scene, const Eigen::Vector2d& xy) {
-  return xy.x() > 0 && xy.y() > 0 && xy.x() < scene.camera.width && xy.y() < scene.camera.height;
-}
-
-int CountSift(const cv::Mat& image) {
-  std::vector<cv::KeyPoint> keypoints;
-  cv::Mat gray;
-  cv::cvtColor(image, gray, cv::COLOR_BGR2GRAY);
-  cv::SIFT::create()->detect(gray, keypoints);
-  return static_cast<int>(keypoints.size());
-}
+using synth_test::CountSift;
+using synth_test::InImage;
+using synth_test::Project;
+using synth_test::SmallOptions;
+using synth_test::TempDir;
 
 TEST(SynthOptions, CheckRejectsBadOptions) {
   SynthOptions options;
@@ -99,10 +61,96 @@ TEST(SynthOptions, CheckRejectsBadOptions) {
   bad.width = 321;
   expect_rejected(bad, "even width and height");
   bad = options;
+  bad.scene = "street";
+  bad.street_route = "loop";
+  expect_rejected(bad, "unknown street route 'loop'");
+  bad = options;
+  bad.scene = "street";
+  bad.street_laps = 0;
+  expect_rejected(bad, "street_laps");
+  bad = options;
+  bad.scene = "street";
+  bad.street_look_ahead_degrees = 75.0;
+  expect_rejected(bad, "street_look_ahead_degrees must be in [0, 60]");
+  bad = options;
+  bad.scene = "street";
+  bad.street_abrupt_turns = true;
+  expect_rejected(bad, "needs street_look_ahead_degrees of at least 20");
+  bad.street_look_ahead_degrees = 30.0;
+  EXPECT_NO_THROW(bad.Check());
+  bad.scene = "cylinder";  // the street options do nothing there
+  expect_rejected(bad, "apply to the street scene only");
+  bad = options;
+  bad.shake_degrees = -1.0;
+  expect_rejected(bad, "shake_degrees");
+  bad = options;
+  bad.shake_centimeters = 500.0;
+  expect_rejected(bad, "shake_centimeters");
+  bad = options;
+  bad.degradation.noise_sigma = -2.0;
+  expect_rejected(bad, "noise sigma");
+  bad = options;
+  bad.degradation.low_texture_contrast = 1.5;
+  expect_rejected(bad, "low_texture_contrast");
+  bad = options;
+  bad.degradation.jpeg_quality = 101;
+  expect_rejected(bad, "jpeg_quality");
+  bad = options;
+  bad.degradation.motion_blur = {{{10, 20}, 5.0}, {{20, 30}, 9.0}};
+  expect_rejected(bad, "motion blur ranges 10-20 and 20-30 overlap");
+  bad = options;
+  bad.degradation.motion_blur = {{{10, 20}, 0.5}};
+  expect_rejected(bad, "motion blur length");
+  bad = options;
+  bad.degradation.dark = {{30, 20}};
+  expect_rejected(bad, "dark range 30-20");
+  bad = options;
+  bad.degradation.low_texture = {{100, 150}};
+  expect_rejected(bad, "names frame 150, but the frames are 0 to 149");
+  bad = options;
   bad.street_revisit_fraction = -0.1;
   expect_rejected(bad, "street_revisit_fraction");
   EXPECT_THROW(MakeScene(bad), InvalidArgument);
   EXPECT_THROW(RenderSyntheticScene(bad, TempDir("bad").path()), InvalidArgument);
+}
+
+// The new options at their defaults keep the poses of the code before them (values printed
+// with 17 digits by that code) and render no degradation.
+TEST(SyntheticScene, DefaultOptionsKeepTheEarlierPosesAndFrames) {
+  struct Expected {
+    const char* scene;
+    int frame;
+    double t[3];
+    double q[4];  // x y z w
+  };
+  const Expected expected[] = {
+      {"street", 0, {0, -12, 1.6}, {-0.64278760968653925, 0, 0, 0.76604444311897812}},
+      {"street", 37, {16, 2.3547780930108608, 1.6},
+       {-0.4545194776720437, -0.4545194776720437, 0.54167522041970195, 0.54167522041970184}},
+      {"street", 80, {-9.2143490596077093, 12, 1.6},
+       {0, -0.64278760968653925, 0.76604444311897812, 0}},
+      {"street", 149, {10.169888475478979, -11.997594343226243, 1.6},
+       {-0.64272317619180386, -0.0091010962226671759, 0.010846264119909198,
+        0.76596765427014368}},
+      {"cylinder", 37, {3.9884114501302466, 0.30425992912301986, 1.8758389261744965},
+       {0.51910047084624344, 0.56020884098590518, -0.47349608828543288, -0.43875073792169389}},
+      {"cylinder", 149, {1.368080573302676, -3.7587704831436333, 1.5},
+       {-0.72193526917223794, -0.12729666628009376, 0.11810693612578517, 0.66981771962091496}},
+  };
+  for (const Expected& e : expected) {
+    SynthOptions options;
+    options.scene = e.scene;
+    const SyntheticScene scene = MakeScene(options);
+    ASSERT_EQ(scene.NumFrames(), 150);
+    const Rigid3d& pose = scene.world_from_cam[e.frame];
+    SCOPED_TRACE(std::string(e.scene) + " frame " + std::to_string(e.frame));
+    EXPECT_LT((pose.translation - Eigen::Vector3d(e.t[0], e.t[1], e.t[2])).norm(), 1e-12);
+    EXPECT_LT((pose.rotation.coeffs() - Eigen::Vector4d(e.q[0], e.q[1], e.q[2], e.q[3])).norm(),
+              1e-12);
+  }
+  const SyntheticScene scene = MakeScene(SmallOptions("street"));
+  EXPECT_EQ(cv::norm(RenderDegradedFrame(scene, 4), RenderFrame(scene, 4), cv::NORM_INF), 0.0);
+  EXPECT_EQ(SyntheticFrameName(scene.options, 4), "frame_000004.png");
 }
 
 TEST(SyntheticScene, GroundTruthFilesRoundTripAndMatchPoses) {

@@ -7,27 +7,11 @@
 #include <Eigen/Geometry>
 #include <fmt/format.h>
 
+#include "loopsfm/synth/scene_building.h"
 #include "loopsfm/util/errors.h"
 
 namespace loopsfm {
 namespace {
-
-// Pose of a camera at `center` looking at `target`, with the image's x axis horizontal.
-Rigid3d LookAt(const Eigen::Vector3d& center, const Eigen::Vector3d& target) {
-  const Eigen::Vector3d forward = (target - center).normalized();
-  const Eigen::Vector3d right = forward.cross(Eigen::Vector3d::UnitZ()).normalized();
-  const Eigen::Vector3d down = forward.cross(right);
-  Eigen::Matrix3d rotation;
-  rotation << right, down, forward;
-  return Rigid3d(Eigen::Quaterniond(rotation).normalized(), center);
-}
-
-// Fraction of the path at frame i, in [0, 1].
-double PathFraction(int frame, int num_frames) {
-  return num_frames > 1 ? static_cast<double>(frame) / (num_frames - 1) : 0.0;
-}
-
-Eigen::Vector3d Rgb(double r, double g, double b) { return Eigen::Vector3d(r, g, b); }
 
 // --- cylinder -------------------------------------------------------------------------------
 
@@ -79,172 +63,77 @@ void BuildCylinderScene(const SynthOptions& options, SyntheticScene* scene) {
   }
 }
 
-// --- street ---------------------------------------------------------------------------------
+// --- hand-held shake ------------------------------------------------------------------------
 
-constexpr double kBlockHalfX = 10.0;
-constexpr double kBlockHalfY = 6.0;
-constexpr double kStreetStandoff = 6.0;
-constexpr double kStreetWidth = 16.0;
-constexpr double kEyeHeight = 1.6;
-constexpr double kStreetPitchDegrees = 10.0;
+// Sinusoids summed per shake axis, with frequencies in cycles per frame (0.5 to 4 Hz at 30 fps).
+constexpr int kShakeWaves = 8;
+constexpr double kShakeMinFrequency = 1.0 / 60.0;
+constexpr double kShakeMaxFrequency = 1.0 / 7.5;
 
-// A facade material with a random colour scheme and noise character.
-Material RandomFacadeMaterial(Random* rng) {
-  static constexpr std::array<std::array<double, 3>, 6> kPalette = {{
-      {0.85, 0.78, 0.62},  // sandstone
-      {0.72, 0.36, 0.26},  // brick
-      {0.62, 0.66, 0.72},  // concrete blue-grey
-      {0.80, 0.74, 0.45},  // ochre
-      {0.55, 0.62, 0.48},  // green plaster
-      {0.90, 0.88, 0.86},  // white render
-  }};
-  const auto& base = kPalette[rng->UniformInt(0, kPalette.size() - 1)];
-  Material m;
-  m.seed = rng->Engine()();
-  const Eigen::Vector3d colour(base[0], base[1], base[2]);
-  m.light = (colour * rng->UniformReal(0.95, 1.1)).cwiseMin(1.0);
-  m.dark = colour * rng->UniformReal(0.08, 0.2);
-  m.noise.frequency = rng->UniformReal(1.2, 2.5);
-  m.noise.octaves = 10;
-  m.noise.gain = rng->UniformReal(0.62, 0.75);
-  m.noise.sharpness = rng->UniformReal(3.0, 6.0);
-  m.noise.ridged = rng->UniformReal() < 0.25;
-  m.contrast = rng->UniformReal(2.0, 3.5);
-  return m;
-}
-
-// Splits [lo, hi] into `parts` pieces with random lengths (ratios between 0.6 and 1.4).
-std::vector<double> RandomSplits(double lo, double hi, int parts, Random* rng) {
-  std::vector<double> weights(parts);
-  for (double& w : weights) w = rng->UniformReal(0.6, 1.4);
-  double total = 0.0;
-  for (double w : weights) total += w;
-  std::vector<double> cuts = {lo};
-  for (double w : weights) cuts.push_back(cuts.back() + (hi - lo) * w / total);
-  cuts.back() = hi;
-  return cuts;
-}
-
-// Position and inward (towards the block) horizontal direction at arc length s along the
-// rounded rectangle kStreetStandoff outside the block, counter-clockwise, starting where the
-// straight part of the south side (y < 0) begins.
-void StreetPathPoint(double s, Eigen::Vector2d* position, Eigen::Vector2d* inward) {
-  const double hx = kBlockHalfX, hy = kBlockHalfY, d = kStreetStandoff;
-  const std::array<Eigen::Vector2d, 4> corners = {
-      Eigen::Vector2d(hx, -hy), Eigen::Vector2d(hx, hy), Eigen::Vector2d(-hx, hy),
-      Eigen::Vector2d(-hx, -hy)};
-  const double arc = 0.5 * M_PI * d;
-  const double perimeter = 4.0 * (hx + hy) + 4.0 * arc;
-  s = std::fmod(s, perimeter);
-  if (s < 0.0) s += perimeter;
-  for (int k = 0; k < 4; ++k) {
-    const Eigen::Vector2d& a = corners[(k + 3) % 4];
-    const Eigen::Vector2d& b = corners[k];
-    const double side = (b - a).norm();
-    const Eigen::Vector2d along = (b - a) / side;
-    const Eigen::Vector2d outward(along.y(), -along.x());
-    if (s <= side) {
-      *position = a + s * along + d * outward;
-      *inward = -outward;
-      return;
-    }
-    s -= side;
-    if (s <= arc || k == 3) {
-      const double phi = std::atan2(outward.y(), outward.x()) + std::min(s, arc) / d;
-      const Eigen::Vector2d radial(std::cos(phi), std::sin(phi));
-      *position = b + d * radial;
-      *inward = -radial;
-      return;
-    }
-    s -= arc;
-  }
-}
-
-void BuildStreetScene(const SynthOptions& options, SyntheticScene* scene) {
-  SyntheticWorld& world = scene->world;
-  Random rng(options.seed);
-  Material asphalt;
-  asphalt.seed = rng.Engine()();
-  asphalt.dark = Rgb(0.06, 0.06, 0.07);
-  asphalt.light = Rgb(0.62, 0.60, 0.56);
-  asphalt.noise = {1.5, 10, 0.7, 4.0, false};
-  asphalt.contrast = 2.5;
-  world.materials.push_back(asphalt);
-  world.ground = GroundPlane{0.0, 0};
-
-  // A 3 x 2 grid of buildings filling the block, each set back a little from the street and
-  // of its own height and texture, and two pillars (kiosks, columns) in front of each side.
-  const std::vector<double> xs = RandomSplits(-kBlockHalfX, kBlockHalfX, 3, &rng);
-  const std::vector<double> ys = RandomSplits(-kBlockHalfY, kBlockHalfY, 2, &rng);
-  for (int i = 0; i < 3; ++i) {
-    for (int j = 0; j < 2; ++j) {
-      TexturedBox box;
-      box.min = Eigen::Vector3d(xs[i], ys[j], 0.0);
-      box.max = Eigen::Vector3d(xs[i + 1], ys[j + 1], rng.UniformReal(4.5, 12.0));
-      if (i == 0) box.min.x() += rng.UniformReal(0.0, 1.2);
-      if (i == 2) box.max.x() -= rng.UniformReal(0.0, 1.2);
-      if (j == 0) box.min.y() += rng.UniformReal(0.0, 1.2);
-      if (j == 1) box.max.y() -= rng.UniformReal(0.0, 1.2);
-      box.material = static_cast<int>(world.materials.size());
-      world.materials.push_back(RandomFacadeMaterial(&rng));
-      world.boxes.push_back(box);
-    }
-  }
-  scene->num_block_buildings = static_cast<int>(world.boxes.size());
-  for (int side = 0; side < 4; ++side) {
-    for (int k = 0; k < 2; ++k) {
-      const bool along_x = side % 2 == 0;
-      const double half_length = along_x ? kBlockHalfX : kBlockHalfY;
-      // Centre of the pillar along the side (one in each half) and out from the block.
-      const double along = (k == 0 ? -1.0 : 1.0) * rng.UniformReal(0.2, 0.8) * half_length;
-      const double out = (along_x ? kBlockHalfY : kBlockHalfX) + rng.UniformReal(1.5, 2.5);
-      const double sign = side < 2 ? -1.0 : 1.0;
-      const Eigen::Vector2d center = along_x ? Eigen::Vector2d(along, sign * out)
-                                             : Eigen::Vector2d(sign * out, along);
-      const double half_size = rng.UniformReal(0.3, 0.5);
-      TexturedBox pillar;
-      pillar.min = Eigen::Vector3d(center.x() - half_size, center.y() - half_size, 0.0);
-      pillar.max = Eigen::Vector3d(center.x() + half_size, center.y() + half_size,
-                                   rng.UniformReal(2.5, 4.0));
-      pillar.material = static_cast<int>(world.materials.size());
-      world.materials.push_back(RandomFacadeMaterial(&rng));
-      world.boxes.push_back(pillar);
+// A smooth zero-mean random signal with unit standard deviation over time: a sum of sinusoids
+// of random frequency and phase, each of amplitude sqrt(2 / kShakeWaves).
+class ShakeSignal {
+ public:
+  explicit ShakeSignal(Random* rng) {
+    for (Wave& wave : waves_) {
+      wave.frequency = rng->UniformReal(kShakeMinFrequency, kShakeMaxFrequency);
+      wave.phase = rng->UniformReal(0.0, 2.0 * M_PI);
     }
   }
 
-  // The eight neighbouring blocks across the streets, one building each, seen in the
-  // background where the camera looks past a corner.
-  for (int bx = -1; bx <= 1; ++bx) {
-    for (int by = -1; by <= 1; ++by) {
-      if (bx == 0 && by == 0) continue;
-      const Eigen::Vector3d offset(bx * (2.0 * kBlockHalfX + kStreetWidth),
-                                   by * (2.0 * kBlockHalfY + kStreetWidth), 0.0);
-      TexturedBox box;
-      box.min = offset + Eigen::Vector3d(-kBlockHalfX, -kBlockHalfY, 0.0);
-      box.max = offset + Eigen::Vector3d(kBlockHalfX, kBlockHalfY, rng.UniformReal(8.0, 20.0));
-      box.material = static_cast<int>(world.materials.size());
-      world.materials.push_back(RandomFacadeMaterial(&rng));
-      world.boxes.push_back(box);
+  double operator()(int frame) const {
+    double sum = 0.0;
+    for (const Wave& wave : waves_) {
+      sum += std::sin(2.0 * M_PI * wave.frequency * frame + wave.phase);
     }
+    return std::sqrt(2.0 / kShakeWaves) * sum;
   }
 
-  const double perimeter =
-      4.0 * (kBlockHalfX + kBlockHalfY) + 2.0 * M_PI * kStreetStandoff;
-  const double length = perimeter * (1.0 + options.street_revisit_fraction);
-  const double pitch = kStreetPitchDegrees * M_PI / 180.0;
-  for (int i = 0; i < options.num_frames; ++i) {
-    // Start in the middle of the south side.
-    const double s = kBlockHalfX + PathFraction(i, options.num_frames) * length;
-    Eigen::Vector2d position, inward;
-    StreetPathPoint(s, &position, &inward);
-    const Eigen::Vector3d center(position.x(), position.y(), kEyeHeight);
-    const Eigen::Vector3d forward(std::cos(pitch) * inward.x(), std::cos(pitch) * inward.y(),
-                                  std::sin(pitch));
-    scene->world_from_cam.push_back(LookAt(center, center + forward));
+ private:
+  struct Wave {
+    double frequency = 0.0;
+    double phase = 0.0;
+  };
+  std::array<Wave, kShakeWaves> waves_;
+};
+
+// Turns and moves every camera by a smooth random motion in its own axes.
+void AddShake(const SynthOptions& options, SyntheticScene* scene) {
+  if (options.shake_degrees == 0.0 && options.shake_centimeters == 0.0) return;
+  // A stream of its own, so that shaking does not change the layout drawn from options.seed.
+  Random rng(Random::SplitMix(options.seed ^ 0x7368616b65ull));
+  std::vector<ShakeSignal> signals;
+  for (int axis = 0; axis < 6; ++axis) signals.emplace_back(&rng);
+  const double radians = options.shake_degrees * M_PI / 180.0;
+  const double metres = 0.01 * options.shake_centimeters;
+  for (int i = 0; i < scene->NumFrames(); ++i) {
+    const Eigen::Vector3d rotation_vector =
+        radians * Eigen::Vector3d(signals[0](i), signals[1](i), signals[2](i));
+    const double angle = rotation_vector.norm();
+    Rigid3d cam_from_shaken;
+    if (angle > 0.0) {
+      cam_from_shaken.rotation = Eigen::AngleAxisd(angle, rotation_vector / angle);
+    }
+    cam_from_shaken.translation =
+        metres * Eigen::Vector3d(signals[3](i), signals[4](i), signals[5](i));
+    scene->world_from_cam[i] = scene->world_from_cam[i] * cam_from_shaken;
   }
 }
 
 }  // namespace
+
+Rigid3d LookAt(const Eigen::Vector3d& center, const Eigen::Vector3d& target) {
+  const Eigen::Vector3d forward = (target - center).normalized();
+  const Eigen::Vector3d right = forward.cross(Eigen::Vector3d::UnitZ()).normalized();
+  const Eigen::Vector3d down = forward.cross(right);
+  Eigen::Matrix3d rotation;
+  rotation << right, down, forward;
+  return Rigid3d(Eigen::Quaterniond(rotation).normalized(), center);
+}
+
+double PathFraction(int frame, int num_frames) {
+  return num_frames > 1 ? static_cast<double>(frame) / (num_frames - 1) : 0.0;
+}
 
 void SynthOptions::Check() const {
   LOOPSFM_REQUIRE_OPTION(scene == "cylinder" || scene == "street",
@@ -264,6 +153,35 @@ void SynthOptions::Check() const {
   LOOPSFM_REQUIRE_OPTION(street_revisit_fraction >= 0.0 && street_revisit_fraction <= 1.0,
                          "street_revisit_fraction must be in [0, 1], got {}",
                          street_revisit_fraction);
+  LOOPSFM_REQUIRE_OPTION(street_laps >= 1 && street_laps <= 100,
+                         "street_laps must be between 1 and 100, got {}", street_laps);
+  LOOPSFM_REQUIRE_OPTION(street_route == "block" || street_route == "figure8",
+                         "unknown street route '{}'; use 'block' or 'figure8'", street_route);
+  LOOPSFM_REQUIRE_OPTION(street_look_ahead_degrees >= 0.0 && street_look_ahead_degrees <= 60.0,
+                         "street_look_ahead_degrees must be in [0, 60], got {}",
+                         street_look_ahead_degrees);
+  // Measured on the figure-eight at 0.3 m a frame: with 30 degrees, 14 to 47 of 100 pairs of
+  // frames across each 90-degree turn have 30 or more SIFT matches consistent with an epipolar
+  // geometry; with 20, 7 to 34; with 0, none.
+  LOOPSFM_REQUIRE_OPTION(!street_abrupt_turns || street_look_ahead_degrees >= 20.0,
+                         "street_abrupt_turns needs street_look_ahead_degrees of at least 20 "
+                         "(30 is a good choice), got {}: frames before and after a 90-degree "
+                         "turn that look straight at the facades share too little to match",
+                         street_look_ahead_degrees);
+  LOOPSFM_REQUIRE_OPTION(scene == "street" || (street_laps == 1 && street_route == "block" &&
+                                               street_look_ahead_degrees == 0.0 &&
+                                               !street_abrupt_turns),
+                         "street_laps, street_route, street_look_ahead_degrees and "
+                         "street_abrupt_turns apply to the street scene only, not to '{}'",
+                         scene);
+  LOOPSFM_REQUIRE_OPTION(shake_degrees >= 0.0 && shake_degrees <= 10.0,
+                         "shake_degrees must be in [0, 10], got {}", shake_degrees);
+  LOOPSFM_REQUIRE_OPTION(shake_centimeters >= 0.0 && shake_centimeters <= 100.0,
+                         "shake_centimeters must be in [0, 100], got {}", shake_centimeters);
+  degradation.Check();
+  LOOPSFM_REQUIRE_OPTION(degradation.LastFrameNamed() < num_frames,
+                         "a degradation range names frame {}, but the frames are 0 to {}",
+                         degradation.LastFrameNamed(), num_frames - 1);
   LOOPSFM_REQUIRE_OPTION(fps >= 1 && fps <= 240, "fps must be between 1 and 240, got {}", fps);
   LOOPSFM_REQUIRE_OPTION(!video || (width % 2 == 0 && height % 2 == 0),
                          "video needs an even width and height (H.264 / MPEG-4 use 4:2:0 "
@@ -287,16 +205,22 @@ SyntheticScene MakeScene(const SynthOptions& options) {
   } else {
     BuildStreetScene(options, &scene);
   }
+  AddShake(options, &scene);
   return scene;
 }
 
 std::string SyntheticFrameName(int frame) { return fmt::format("frame_{:06d}.png", frame); }
 
+std::string SyntheticFrameName(const SynthOptions& options, int frame) {
+  const bool jpeg = options.degradation.jpeg_quality > 0 && !options.video;
+  return fmt::format("frame_{:06d}.{}", frame, jpeg ? "jpg" : "png");
+}
+
 std::vector<TrajectoryEntry> GroundTruthTrajectory(const SyntheticScene& scene) {
   std::vector<TrajectoryEntry> entries;
   entries.reserve(scene.world_from_cam.size());
   for (int i = 0; i < scene.NumFrames(); ++i) {
-    entries.push_back({SyntheticFrameName(i), scene.world_from_cam[i]});
+    entries.push_back({SyntheticFrameName(scene.options, i), scene.world_from_cam[i]});
   }
   return entries;
 }
@@ -308,6 +232,39 @@ std::optional<SurfaceHit> CastPixelRay(const SyntheticScene& scene, int frame,
   const Eigen::Vector3d ray_in_cam = scene.camera.CamFromImg(image_point).homogeneous();
   const Eigen::Vector3d direction = (world_from_cam.rotation * ray_in_cam).normalized();
   return scene.world.CastRay(world_from_cam.translation, direction);
+}
+
+Eigen::Vector2d ImageMotion(const SyntheticScene& scene, int frame) {
+  LOOPSFM_CHECK(frame >= 0 && frame < scene.NumFrames());
+  const int n = scene.NumFrames();
+  if (n < 2) return Eigen::Vector2d::Zero();
+  auto turn_to = [&](int other) {
+    return RotationAngleDegrees(scene.world_from_cam[frame].rotation.inverse() *
+                                scene.world_from_cam[other].rotation);
+  };
+  // The next frame, unless the view turns clearly less towards the previous one.
+  int other = frame + 1;
+  if (other == n || (frame > 0 && turn_to(frame - 1) + 1.0 < turn_to(frame + 1))) {
+    other = frame - 1;
+  }
+  const Rigid3d other_from_world = scene.world_from_cam[other].Inverse();
+  constexpr int kGrid = 8;
+  Eigen::Vector2d sum = Eigen::Vector2d::Zero();
+  int count = 0;
+  for (int gy = 0; gy < kGrid; ++gy) {
+    for (int gx = 0; gx < kGrid; ++gx) {
+      const Eigen::Vector2d pixel((gx + 0.5) * scene.camera.width / kGrid,
+                                  (gy + 0.5) * scene.camera.height / kGrid);
+      const std::optional<SurfaceHit> hit = CastPixelRay(scene, frame, pixel);
+      if (!hit) continue;
+      const Eigen::Vector3d in_other = other_from_world * hit->point_in_world;
+      if (in_other.z() <= 1e-6) continue;
+      sum += scene.camera.ImgFromCam(in_other) - pixel;
+      ++count;
+    }
+  }
+  if (count == 0) return Eigen::Vector2d::Zero();
+  return (other > frame ? 1.0 : -1.0) * sum / count;
 }
 
 }  // namespace loopsfm
