@@ -16,9 +16,10 @@ void LogTrackReport(const TrackBuildReport& report) {
   for (const auto& [length, count] : report.length_histogram) {
     histogram += fmt::format(" {}:{}", length, count);
   }
-  spdlog::info("tracks: {} (mean length {:.2f}), {} conflicting removed; length histogram{}",
+  spdlog::info("tracks: {} (mean length {:.2f}), {} conflicting split ({} matches left out); "
+               "length histogram{}",
                report.num_tracks, report.mean_track_length, report.num_conflicting_tracks,
-               histogram);
+               report.num_dropped_matches, histogram);
 }
 
 }  // namespace

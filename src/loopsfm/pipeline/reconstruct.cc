@@ -141,8 +141,9 @@ ReconstructReport Reconstruct(const fs::path& input, const fs::path& output_dir,
   stage.Restart();
   const MapperInput mapper_input = LoadMapperInput(database, &report.tracks);
   report.stage_times.push_back({"tracks", stage.ElapsedSeconds()});
-  spdlog::info("tracks: {} (mean length {:.2f}, {} conflicting removed)", report.tracks.num_tracks,
-               report.tracks.mean_track_length, report.tracks.num_conflicting_tracks);
+  spdlog::info("tracks: {} (mean length {:.2f}; {} conflicting split, {} matches left out)",
+               report.tracks.num_tracks, report.tracks.mean_track_length,
+               report.tracks.num_conflicting_tracks, report.tracks.num_dropped_matches);
 
   stage.Restart();
   std::vector<Reconstruction> models;

@@ -1,8 +1,11 @@
 #pragma once
 // Tracks from verified matches: union-find over all features, joined along every verified
-// inlier match. A track that holds two different features of one image is a conflict (a
-// wrong match somewhere along it) and is removed whole. The result is the track set as built
-// from matching, before any mapper prunes it; loop closing re-uses it.
+// inlier match. A component that holds two different features of one image is a conflict
+// (a wrong match somewhere along it): it is split into consistent parts by joining its
+// matches again, strongest pairs first, and leaving out every match that would put two
+// features of one image together. Long tracks hold drift down and carry loops, so they are
+// split, not dropped. The result is the track set as built from matching, before any
+// mapper prunes it; loop closing re-uses it.
 
 #include <map>
 #include <unordered_map>
@@ -23,7 +26,9 @@ struct TrackBuildReport {
   size_t num_pairs = 0;
   size_t num_matches = 0;
   size_t num_tracks = 0;
+  // Components with a conflict (split into consistent parts), and the matches left out.
   size_t num_conflicting_tracks = 0;
+  size_t num_dropped_matches = 0;
   size_t num_short_tracks = 0;
   // Track length -> number of tracks of that length.
   std::map<size_t, size_t> length_histogram;
