@@ -65,7 +65,6 @@ void AddMatchFlags(CLI::App* cmd, MatchFlags* flags) {
   cmd->add_option("--ratio", flags->options.matcher.max_ratio,
                   "Lowe's ratio test threshold (0.8 default; 0.7 and 0.5 are stricter)")
       ->capture_default_str();
-  cmd->add_flag("--mutual", flags->mutual, "Keep only mutual nearest neighbours");
   cmd->add_option("--max-error", flags->options.verification.max_error,
                   "RANSAC inlier threshold in pixels")
       ->capture_default_str();
@@ -79,7 +78,6 @@ MatchOptions MatchFlags::Resolve() const {
   // Videos and ordered image folders alike: sequential neighbours plus loop detection, so
   // loops are found without a flag.
   resolved.strategy = ParsePairStrategy(pairs.empty() ? "vocabtree" : pairs);
-  if (mutual) resolved.matcher.cross_check = true;
   // The wider window of the first frames is never narrower than the requested overlap.
   resolved.sequential.initial_overlap =
       std::max(resolved.sequential.initial_overlap, resolved.sequential.overlap);

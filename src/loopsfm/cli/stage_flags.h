@@ -25,7 +25,6 @@ struct MatchFlags {
   // Empty: the default, vocabtree.
   std::string pairs;
   MatchOptions options;
-  bool mutual = false;
   std::string vocab;
   MatchOptions Resolve() const;
 };
