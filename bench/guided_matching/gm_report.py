@@ -28,6 +28,15 @@ def timed(row, key, digits=1):
     return fmt(value, digits) + mark
 
 
+def components_text(row):
+    """'exhaustive / vocabtree' frames in the largest connected component of verified pairs."""
+    c = row.get("components") or {}
+    return f"{fmt(c.get('exhaustive'))} / {fmt(c.get('vocab'))}"
+
+
+COMPONENTS_HEADER = "largest component, exhaustive / vocab"
+
+
 def markdown_table(header, rows):
     lines = ["| " + " | ".join(header) + " |", "|" + "|".join("---" for _ in header) + "|"]
     lines += ["| " + " | ".join(str(c) for c in row) + " |" for row in rows]
@@ -38,7 +47,7 @@ def sweep_table(rows):
     header = ["set", "variant", "frames", "repeats", "stride", "span", "density",
               "exhaustive s", "lowres s", "vocabtree s", "optimum s", "vocab / optimum",
               "exhaustive / vocab", "lowres / vocab", "vocab pair recall",
-              "vocab inlier-weighted recall"]
+              "vocab inlier-weighted recall", COMPONENTS_HEADER]
     body = []
     for r in rows:
         ex = timed(r, "exhaustive") + ("" if r["exhaustive_measured"] else " (est.)")
@@ -47,7 +56,7 @@ def sweep_table(rows):
                      fmt(r["optimum_s"]), fmt(r["vocab_over_optimum"], 2),
                      fmt(r["exhaustive_over_vocab"], 1), fmt(r["lowres_over_vocab"], 2),
                      fmt(r["vocab"]["pair_recall"], 1, True),
-                     fmt(r["vocab"]["weighted_recall"], 2, True)])
+                     fmt(r["vocab"]["weighted_recall"], 2, True), components_text(r)])
     return markdown_table(header, body)
 
 
@@ -75,7 +84,8 @@ def recall_table(rows, target_frames):
               "loop pairs found", "inlier-weighted recall", "inlier matches recovered",
               "lowres pair recall", "lowres inlier-weighted", "exhaustive s", "lowres s",
               "vocabtree s", "optimum s", "vocab / optimum", "measured optimum s",
-              "vocab / measured optimum", "targets"]
+              "vocab / measured optimum", "targets", COMPONENTS_HEADER,
+              "lowres largest component"]
     body = []
     for r in rows:
         v, lo = r["vocab"], r["lowres"]
@@ -87,7 +97,8 @@ def recall_table(rows, target_frames):
                      fmt(lo["weighted_recall"], 2, True), timed(r, "exhaustive"),
                      timed(r, "lowres"), timed(r, "vocab"), fmt(r["optimum_s"]),
                      fmt(r["vocab_over_optimum"], 2), fmt(r["optimum_measured_s"]),
-                     fmt(r["vocab_over_measured_optimum"], 2), targets_text(r, target_frames)])
+                     fmt(r["vocab_over_measured_optimum"], 2), targets_text(r, target_frames),
+                     components_text(r), fmt(r["components"]["lowres"])])
     return markdown_table(header, body)
 
 
@@ -104,7 +115,7 @@ def settings_table(rows):
     header = ["set", "frames", "vocabtree flags", "vocabtree s", "optimum s", "vocab / optimum",
               "vocab / measured optimum",
               "tree build s", "scoring s", "rounds", "pairs matched", "pair recall",
-              "recall of pairs > overlap apart", "inlier-weighted recall"]
+              "recall of pairs > overlap apart", "inlier-weighted recall", COMPONENTS_HEADER]
     body = []
     for r in rows:
         b, v = r["breakdown"], r["vocab"]
@@ -113,7 +124,7 @@ def settings_table(rows):
                      fmt(r["vocab_over_measured_optimum"], 2), fmt(b["build_s"]),
                      fmt(b["score_s"]), b["rounds"], b["pairs_matched"],
                      fmt(v["pair_recall"], 1, True), fmt(v["far_recall"], 1, True),
-                     fmt(v["weighted_recall"], 2, True)])
+                     fmt(v["weighted_recall"], 2, True), components_text(r)])
     return markdown_table(header, body)
 
 
@@ -223,6 +234,41 @@ def plot_recall(rows, out_dir):
     _run_gnuplot(script, path)
 
 
+def plot_components(rows, out_dir):
+    """components.png: per set (whole sequence), frames in the largest connected component of
+    the verified-pair graph (pairs with >= 15 inliers), vocabtree against exhaustive, as a
+    percentage of the set's frames (bars) and in frames (labels)."""
+    rows = [r for r in rows if r.get("components")]
+    if not rows:
+        return
+    data_dir = out_dir / "plot_data"
+    data_dir.mkdir(parents=True, exist_ok=True)
+    dat = data_dir / "components.dat"
+    lines = ["# set frames exhaustive vocabtree exhaustive_% vocabtree_%"]
+    for r in rows:
+        c = r["components"]
+        lines.append(f"\"{r['set']} ({c['frames']} frames)\" {c['frames']} {c['exhaustive']} "
+                     f"{c['vocab']} {100.0 * c['exhaustive'] / c['frames']:.2f} "
+                     f"{100.0 * c['vocab'] / c['frames']:.2f}")
+    dat.write_text("\n".join(lines) + "\n")
+    path = out_dir / "components.png"
+    width = max(700, 160 * len(rows))
+    script = (f"set terminal pngcairo size {width},480 font 'sans,10' noenhanced\n"
+              f"set output '{path}'\n"
+              "set title 'largest connected component of verified pairs (>= 15 inliers): "
+              "vocabtree against exhaustive'\n"
+              "set ylabel '% of the frames (labels: frames)'\nset yrange [0:110]\n"
+              "set style data histograms\nset style histogram clustered gap 1\n"
+              "set style fill solid 0.85 border -1\nset grid ytics\nset key below\n"
+              f"plot '{dat}' u 5:xtic(1) t 'exhaustive' lc rgb '#4477aa', "
+              "'' u 6 t 'vocabtree' lc rgb '#ee6677', "
+              # Frame counts over the bars: with two bars and gap 1 a bar is 1/3 wide, so the
+              # bars of row i stand at i - 1/6 and i + 1/6.
+              "'' u ($0 - 1.0/6):5:3 w labels offset 0,0.7 notitle, "
+              "'' u ($0 + 1.0/6):6:4 w labels offset 0,0.7 notitle\n")
+    _run_gnuplot(script, path)
+
+
 def plot_all(results, out_dir):
     if not gnuplot_available():
         log("gnuplot not found: no figures (install it with `apt-get install gnuplot-nox`)")
@@ -233,3 +279,4 @@ def plot_all(results, out_dir):
                "matching time against frames (constant density)")
     plot_breakdown(results["breakdown"], out_dir)
     plot_recall(results["recall"], out_dir)
+    plot_components(results["recall"], out_dir)

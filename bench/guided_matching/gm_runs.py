@@ -354,6 +354,35 @@ def median_runs(results):
 # Ground truth and recall
 
 
+# Fewest inliers for a verified pair to join two frames in the view graph (loopsfm's
+# --min-inliers default, COLMAP's SiftMatching.min_num_inliers).
+COMPONENT_MIN_INLIERS = 15
+
+
+def largest_component(num_frames, verified, min_inliers=COMPONENT_MIN_INLIERS):
+    """Frames in the largest connected component of the graph whose nodes are the variant's
+    frames 0..num_frames-1 and whose edges are the verified pairs {(k, l): inliers} with at
+    least min_inliers inliers (union-find with path halving)."""
+    parent = list(range(num_frames))
+
+    def find(i):
+        while parent[i] != i:
+            parent[i] = parent[parent[i]]
+            i = parent[i]
+        return i
+
+    for (k, l), inliers in verified.items():
+        if inliers >= min_inliers:
+            root_k, root_l = find(k), find(l)
+            if root_k != root_l:
+                parent[root_k] = root_l
+    sizes = {}
+    for i in range(num_frames):
+        root = find(i)
+        sizes[root] = sizes.get(root, 0) + 1
+    return max(sizes.values(), default=0)
+
+
 def variant_truth(variant, base_truth, frames):
     """Exhaustive's verified pairs of a variant, {(k, l): inliers}, from the base sequence's.
 

@@ -22,8 +22,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import gm_report  # noqa: E402
 from gm_runs import (base_frames, binary_stamp, build_variant_db,  # noqa: E402
-                     density_variant, ensure_base, load_average, log, make_set, match_run,
-                     median_runs, recall, stride_variant, variant_truth)
+                     density_variant, ensure_base, largest_component, load_average, log,
+                     make_set, match_run, median_runs, recall, stride_variant, variant_truth)
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
 ALL_SETS = ["street", "block", "templeRing", "kitti07_160", "fox"]
@@ -189,8 +189,13 @@ class SetBench:
         row["optimum_measured_s"] = None
         if variant is self.full and args.measured_optimum:
             row["optimum_measured_s"] = self.measured_optimum()
+        # Frames in the largest connected component of each strategy's verified pairs.
+        row["components"] = {"frames": variant.num_frames,
+                             "exhaustive": largest_component(variant.num_frames, truth),
+                             "lowres": None, "vocab": None}
         if "lowres" in strategies:
             lo = median_runs([self.run(variant, "lowres", [], k) for k in range(args.runs)])
+            row["components"]["lowres"] = largest_component(variant.num_frames, lo["verified"])
             row["lowres_s"] = lo["report"]["seconds"]
             row["lowres_all_s"] = lo["all_seconds"]
             row["lowres"] = recall(truth, lo["verified"], args.overlap, variant)
@@ -204,6 +209,7 @@ class SetBench:
         row["vocab_all_s"] = vo["all_seconds"]
         row["vocab_load"] = vo["load_before"]
         row["vocab"] = recall(truth, vo["verified"], args.overlap, variant)
+        row["components"]["vocab"] = largest_component(variant.num_frames, vo["verified"])
         row["vocab_report"] = rep
         row["vocab_match_ms"] = rep["median_match_ms"]
         row["flags"] = " ".join(vocab_extra)
