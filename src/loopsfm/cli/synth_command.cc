@@ -1,4 +1,10 @@
 #include <memory>
+#include <string>
+#include <string_view>
+#include <utility>
+#include <vector>
+
+#include <fmt/format.h>
 
 #include "loopsfm/cli/commands.h"
 #include "loopsfm/synth/render.h"
@@ -38,6 +44,7 @@ void AddSynthCommand(CLI::App& app) {
   auto options = std::make_shared<SynthOptions>();
   auto output = std::make_shared<std::string>();
   auto ranges = std::make_shared<SynthRangeFlags>();
+  auto camera_model = std::make_shared<std::string>("PINHOLE");
   CLI::App* cmd = app.add_subcommand(
       "synth", "Render a synthetic scene with exact ground truth (cylinder | street)");
   cmd->add_option("scene", options->scene, "Scene: cylinder | street")->capture_default_str();
@@ -48,6 +55,29 @@ void AddSynthCommand(CLI::App& app) {
   cmd->add_flag("--video", options->video, "Write video.mp4 instead of images/");
   cmd->add_option("--seed", options->seed, "Seed of textures, layout, shake and noise")
       ->capture_default_str();
+
+  // The lens.
+  cmd->add_option("--camera-model", *camera_model,
+                  "Lens: COLMAP camera model of the frames, with its distortion coefficients "
+                  "below (" + CameraModelNameList() + ")")
+      ->capture_default_str();
+  LensOptions& lens = options->lens;
+  const std::pair<const char*, double*> coefficients[] = {
+      {"--k1", &lens.k1}, {"--k2", &lens.k2}, {"--k3", &lens.k3}, {"--k4", &lens.k4},
+      {"--k5", &lens.k5}, {"--k6", &lens.k6}, {"--p1", &lens.p1}, {"--p2", &lens.p2}};
+  for (const auto& [flag, value] : coefficients) {
+    const std::string_view name = flag + 2;
+    std::vector<std::string_view> models;  // those whose parameters name it (k1 is also "k")
+    for (const CameraModelId id : kCameraModelIds) {
+      for (const std::string_view param : CameraModelParamNames(id)) {
+        if (param == name || (param == "k" && name == "k1")) models.push_back(CameraModelName(id));
+      }
+    }
+    cmd->add_option(flag, *value,
+                    fmt::format("Lens: distortion coefficient {}, for {}", name,
+                                fmt::join(models, ", ")))
+        ->capture_default_str();
+  }
 
   // The street walk.
   cmd->add_option("--route", options->street_route,
@@ -92,7 +122,12 @@ void AddSynthCommand(CLI::App& app) {
                   "H.264 (whose quality OpenCV fixes at CRF 23); 0: off")
       ->capture_default_str();
 
-  cmd->callback([options, output, ranges] {
+  cmd->callback([options, output, ranges, camera_model] {
+    try {
+      options->lens.model = ParseCameraModel(*camera_model);
+    } catch (const InvalidArgument& e) {
+      throw InvalidArgument(fmt::format("--camera-model: {}", e.what()));
+    }
     FrameDegradationOptions& degradation = options->degradation;
     ParseRangeFlag(ranges->blur, ParseBlurRanges, &degradation.motion_blur);
     ParseRangeFlag(ranges->low_texture, ParseFrameRanges, &degradation.low_texture);

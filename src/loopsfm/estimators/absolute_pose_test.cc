@@ -22,6 +22,15 @@ Camera ExampleCamera(CameraModelId id) {
     case CameraModelId::kOpenCV:
       camera.params = {1000, 1010, 640, 480, 0.0578, -0.0805, -0.00098, 0.00016};
       break;
+    case CameraModelId::kOpenCVFisheye:
+      camera.params = {1000, 1010, 640, 480, 0.05, -0.02, 0.004, -0.0008};
+      break;
+    case CameraModelId::kFullOpenCV:
+      camera.params = {1000, 1010, 640, 480, 0.0578, -0.0805,
+                       -0.00098, 0.00016, 0.012, 0.03, -0.01, 0.004};
+      break;
+    case CameraModelId::kSimpleRadialFisheye: camera.params = {1000, 640, 480, 0.03}; break;
+    case CameraModelId::kRadialFisheye: camera.params = {1000, 640, 480, 0.03, -0.005}; break;
   }
   camera.Check();
   return camera;
@@ -70,10 +79,10 @@ Rigid3d Perturb(const Rigid3d& pose, double angle_rad, const Eigen::Vector3d& de
   return perturbed;
 }
 
-class AbsolutePoseTest : public ::testing::TestWithParam<int> {};
+class AbsolutePoseTest : public ::testing::TestWithParam<CameraModelId> {};
 
 TEST_P(AbsolutePoseTest, IsAccurateWith40PercentOutliersAnd1PxNoise) {
-  const Camera camera = ExampleCamera(static_cast<CameraModelId>(GetParam()));
+  const Camera camera = ExampleCamera(GetParam());
   AbsolutePoseEstimationOptions options;
   options.max_error_px = 4.0;
   double max_rotation_error = 0.0, max_center_error = 0.0;
@@ -118,7 +127,7 @@ TEST_P(AbsolutePoseTest, IsAccurateWith40PercentOutliersAnd1PxNoise) {
   EXPECT_LT(sum_rotation_error, 1.5 * sum_reference_error);
 }
 
-INSTANTIATE_TEST_SUITE_P(AllModels, AbsolutePoseTest, ::testing::Range(0, 5));
+INSTANTIATE_TEST_SUITE_P(AllModels, AbsolutePoseTest, ::testing::ValuesIn(kCameraModelIds));
 
 TEST(AbsolutePose, IsDeterministicForASeed) {
   const Camera camera = ExampleCamera(CameraModelId::kSimpleRadial);

@@ -29,8 +29,20 @@ Camera MakeCamera(CameraModelId model_id, double focal) {
   switch (model_id) {
     case CameraModelId::kPinhole: camera.params = {focal, focal * 1.01, 322.0, 238.0}; break;
     case CameraModelId::kSimpleRadial: camera.params = {focal, 322.0, 238.0, -0.06}; break;
+    case CameraModelId::kRadial: camera.params = {focal, 322.0, 238.0, -0.06, 0.01}; break;
     case CameraModelId::kOpenCV:
       camera.params = {focal, focal * 1.01, 322.0, 238.0, -0.06, 0.01, 0.001, -0.002};
+      break;
+    case CameraModelId::kOpenCVFisheye:
+      camera.params = {focal, focal * 1.01, 322.0, 238.0, 0.05, -0.02, 0.004, -0.0008};
+      break;
+    case CameraModelId::kFullOpenCV:
+      camera.params = {focal, focal * 1.01, 322.0, 238.0, -0.06, 0.01,
+                       0.001, -0.002, 0.003, 0.02, -0.01, 0.004};
+      break;
+    case CameraModelId::kSimpleRadialFisheye: camera.params = {focal, 322.0, 238.0, 0.03}; break;
+    case CameraModelId::kRadialFisheye:
+      camera.params = {focal, 322.0, 238.0, 0.03, -0.005};
       break;
     default: camera.params = {focal, 320.0, 240.0}; camera.model_id = CameraModelId::kSimplePinhole;
   }
@@ -575,10 +587,7 @@ TEST_P(ReprojectionCostTest, MatchesCameraProjectionAndFiniteDifferences) {
   ExpectJacobiansMatchFiniteDifferences(*constant_pose, point_blocks);
 }
 
-INSTANTIATE_TEST_SUITE_P(Models, ReprojectionCostTest,
-                         ::testing::Values(CameraModelId::kSimplePinhole, CameraModelId::kPinhole,
-                                           CameraModelId::kSimpleRadial, CameraModelId::kRadial,
-                                           CameraModelId::kOpenCV));
+INSTANTIATE_TEST_SUITE_P(Models, ReprojectionCostTest, ::testing::ValuesIn(kCameraModelIds));
 
 TEST(CostFunctions, DistanceAndRelativePoseJacobiansMatchFiniteDifferences) {
   std::unique_ptr<ceres::CostFunction> distance(PointDistanceCost::Create(1.5, 2.0));

@@ -3,6 +3,8 @@
 #include <fstream>
 #include <sstream>
 
+#include <fmt/format.h>
+
 #include "loopsfm/util/errors.h"
 
 namespace loopsfm {
@@ -28,6 +30,18 @@ void ForEachDataLine(std::istream& in, F&& f) {
   }
 }
 
+// "'SIMPLE_PINHOLE width height f cx cy', 'PINHOLE width height fx fy cx cy', ...": the line
+// of every camera model, for messages.
+std::string IntrinsicsLineFormats() {
+  std::string formats;
+  for (const CameraModelId id : kCameraModelIds) {
+    if (!formats.empty()) formats += ", ";
+    formats += fmt::format("'{} width height {}'", CameraModelName(id),
+                           fmt::join(CameraModelParamNames(id), " "));
+  }
+  return formats;
+}
+
 }  // namespace
 
 Camera ReadIntrinsicsFile(const std::filesystem::path& path) {
@@ -35,22 +49,28 @@ Camera ReadIntrinsicsFile(const std::filesystem::path& path) {
   std::optional<Camera> camera;
   ForEachDataLine(in, [&](int number, const std::string& line) {
     if (camera) return;
+    auto fail = [&](const std::string& what) {
+      throw InputError(fmt::format("{}:{}: {}: '{}'; a camera line is 'MODEL width height "
+                                   "PARAMS...', one of {}",
+                                   path.string(), number, what, line, IntrinsicsLineFormats()));
+    };
     std::istringstream fields(line);
     std::string model_name;
     Camera parsed;
-    fields >> model_name >> parsed.width >> parsed.height;
+    fields >> model_name;
     const auto model = CameraModelFromName(model_name);
-    if (!model) {
-      throw InputError(fmt::format(
-          "{}:{}: unknown camera model '{}'; use PINHOLE, SIMPLE_PINHOLE, SIMPLE_RADIAL, RADIAL "
-          "or OPENCV",
-          path.string(), number, model_name));
-    }
+    if (!model) fail(fmt::format("unknown camera model '{}'", model_name));
     parsed.model_id = *model;
+    if (!(fields >> parsed.width >> parsed.height)) {
+      fail(fmt::format("expected the image width and height after {}", model_name));
+    }
     for (double value; fields >> value;) parsed.params.push_back(value);
-    if (fields.fail() && !fields.eof()) {
-      throw InputError(fmt::format("{}:{}: expected numbers after the model name, got '{}'",
-                                   path.string(), number, line));
+    if (fields.fail() && !fields.eof()) fail("expected numbers after the image size");
+    const int expected = CameraModelNumParams(parsed.model_id);
+    if (static_cast<int>(parsed.params.size()) != expected) {
+      fail(fmt::format("camera model {} takes {} parameters after the image size ({}), got {}",
+                       model_name, expected, CameraModelParamsInfo(parsed.model_id),
+                       parsed.params.size()));
     }
     parsed.has_prior_focal_length = true;
     try {
@@ -62,8 +82,8 @@ Camera ReadIntrinsicsFile(const std::filesystem::path& path) {
   });
   if (!camera) {
     throw InputError(fmt::format("intrinsics file '{}' holds no camera line; expected e.g. "
-                                 "'PINHOLE 640 480 500 500 320 240'",
-                                 path.string()));
+                                 "'PINHOLE 640 480 500 500 320 240', or one of {}",
+                                 path.string(), IntrinsicsLineFormats()));
   }
   return *camera;
 }
@@ -71,11 +91,11 @@ Camera ReadIntrinsicsFile(const std::filesystem::path& path) {
 void WriteIntrinsicsFile(const std::filesystem::path& path, const Camera& camera) {
   std::ofstream out(path);
   if (!out) throw StorageError(fmt::format("cannot write '{}'", path.string()));
-  const auto info = VisitCameraModel(camera.model_id, [](auto m) { return decltype(m)::kParamsInfo; });
-  out << "# " << camera.ModelName() << " width height " << info << "\n";
+  out << "# " << camera.ModelName() << " width height " << CameraModelParamsInfo(camera.model_id)
+      << "\n";
   out << camera.ModelName() << ' ' << camera.width << ' ' << camera.height;
-  out.precision(9);
-  for (double p : camera.params) out << ' ' << p;
+  // The shortest decimal form that reads back as the same double.
+  for (double p : camera.params) out << fmt::format(" {}", p);
   out << '\n';
 }
 

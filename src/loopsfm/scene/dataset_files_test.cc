@@ -3,6 +3,10 @@
 #include <gtest/gtest.h>
 
 #include <fstream>
+#include <string>
+#include <vector>
+
+#include <fmt/format.h>
 
 #include "loopsfm/util/errors.h"
 
@@ -29,16 +33,83 @@ TEST(DatasetFiles, ReadsSharedDataIntrinsics) {
   EXPECT_TRUE(camera.has_prior_focal_length);
 }
 
-TEST(DatasetFiles, RejectsWrongParameterCountWithLineNumber) {
-  const auto path = TempFile("bad.txt", "# comment\nPINHOLE 640 480 500 500 320\n");
-  try {
-    ReadIntrinsicsFile(path);
-    FAIL();
-  } catch (const InputError& e) {
-    EXPECT_NE(std::string(e.what()).find(":2:"), std::string::npos) << e.what();
-    EXPECT_NE(std::string(e.what()).find("takes 4 parameters"), std::string::npos) << e.what();
+TEST(DatasetFiles, ReadsEveryCameraModelInColmapsParameterOrder) {
+  for (const CameraModelId id : kCameraModelIds) {
+    SCOPED_TRACE(std::string(CameraModelName(id)));
+    std::vector<double> params = {500, 510, 320, 240};
+    if (CameraModelParamNames(id)[0] == "f") params = {500, 320, 240};
+    while (static_cast<int>(params.size()) < CameraModelNumParams(id)) {
+      params.push_back(0.01 * static_cast<double>(params.size()));
+    }
+    std::string line = fmt::format("{} 640 480", CameraModelName(id));
+    for (const double p : params) line += fmt::format(" {}", p);
+    const Camera camera = ReadIntrinsicsFile(TempFile("model.txt", "# comment\n" + line + "\n"));
+    EXPECT_EQ(camera.model_id, id);
+    EXPECT_EQ(camera.width, 640);
+    EXPECT_EQ(camera.height, 480);
+    EXPECT_EQ(camera.params, params);
   }
-  EXPECT_THROW(ReadIntrinsicsFile(TempFile("model.txt", "KANNALA 1 1 1 1 1 1\n")), InputError);
+}
+
+TEST(DatasetFiles, IntrinsicsRoundTripExactly) {
+  for (const CameraModelId id : {CameraModelId::kOpenCVFisheye, CameraModelId::kFullOpenCV,
+                                 CameraModelId::kSimpleRadial}) {
+    Camera camera;
+    camera.model_id = id;
+    camera.width = 960;
+    camera.height = 540;
+    camera.params = {1.0 / 3.0 * 1000, 0.1 + 0.2, 479.5, 270.25};
+    while (static_cast<int>(camera.params.size()) < CameraModelNumParams(id)) {
+      camera.params.push_back(-1e-7 / (camera.params.size() + 1.0));
+    }
+    camera.params.resize(CameraModelNumParams(id));
+    const auto path = std::filesystem::temp_directory_path() / "loopsfm_scene_test_write.txt";
+    WriteIntrinsicsFile(path, camera);
+    const Camera read = ReadIntrinsicsFile(path);
+    EXPECT_EQ(read.model_id, id);
+    EXPECT_EQ(read.width, 960);
+    EXPECT_EQ(read.height, 540);
+    EXPECT_EQ(read.params, camera.params);  // bit for bit
+  }
+}
+
+// Bad lines name the file and line, what was expected and the line of every model.
+TEST(DatasetFiles, RejectsBadCameraLinesWithLineNumberAndTheModels) {
+  auto expect_error = [](const std::string& name, const std::string& text,
+                         const std::vector<std::string>& words) {
+    try {
+      ReadIntrinsicsFile(TempFile(name, text));
+      ADD_FAILURE() << "accepted '" << text << "'";
+    } catch (const InputError& e) {
+      const std::string message = e.what();
+      for (const std::string& word : words) {
+        EXPECT_NE(message.find(word), std::string::npos) << "'" << word << "' in " << message;
+      }
+    }
+  };
+  const std::string models =
+      "'SIMPLE_PINHOLE width height f cx cy', 'PINHOLE width height fx fy cx cy', "
+      "'SIMPLE_RADIAL width height f cx cy k', 'RADIAL width height f cx cy k1 k2', "
+      "'OPENCV width height fx fy cx cy k1 k2 p1 p2', "
+      "'OPENCV_FISHEYE width height fx fy cx cy k1 k2 k3 k4', "
+      "'FULL_OPENCV width height fx fy cx cy k1 k2 p1 p2 k3 k4 k5 k6', "
+      "'SIMPLE_RADIAL_FISHEYE width height f cx cy k', "
+      "'RADIAL_FISHEYE width height f cx cy k1 k2'";
+  expect_error("count.txt", "# comment\nPINHOLE 640 480 500 500 320\n",
+               {"count.txt:2: camera model PINHOLE takes 4 parameters after the image size "
+                "(fx, fy, cx, cy), got 3: 'PINHOLE 640 480 500 500 320'",
+                models});
+  expect_error("fisheye.txt", "OPENCV_FISHEYE 640 480 500 500 320 240 0.1 0.01 0.001\n",
+               {"fisheye.txt:1: camera model OPENCV_FISHEYE takes 8 parameters", "got 7", models});
+  expect_error("model.txt", "\n\nKANNALA 1 1 1 1 1 1\n",
+               {"model.txt:3: unknown camera model 'KANNALA'", models});
+  expect_error("size.txt", "RADIAL wide 480 500 320 240 0.1 0.01\n",
+               {"size.txt:1: expected the image width and height after RADIAL", models});
+  expect_error("number.txt", "RADIAL 640 480 500 320 240 0.1 x\n",
+               {"number.txt:1: expected numbers after the image size", models});
+  expect_error("focal.txt", "SIMPLE_RADIAL_FISHEYE 640 480 -500 320 240 0.1\n",
+               {"focal.txt:1: camera focal length must be positive"});
+  expect_error("empty.txt", "# nothing\n", {"holds no camera line", models});
   EXPECT_THROW(ReadIntrinsicsFile("/nonexistent/intrinsics.txt"), InputError);
 }
 

@@ -4,26 +4,24 @@
 
 #include <vector>
 
+#include <Eigen/Geometry>
 #include <ceres/jet.h>
+
+#include "loopsfm/math/random.h"
+#include "loopsfm/sensor/camera_models_test_util.h"
+#include "loopsfm/util/errors.h"
 
 namespace loopsfm {
 namespace {
 
-std::vector<double> ExampleParams(CameraModelId id) {
-  switch (id) {
-    case CameraModelId::kSimplePinhole: return {500, 320, 240};
-    case CameraModelId::kPinhole: return {500, 510, 320, 240};
-    case CameraModelId::kSimpleRadial: return {500, 320, 240, -0.08};
-    case CameraModelId::kRadial: return {500, 320, 240, -0.08, 0.01};
-    case CameraModelId::kOpenCV: return {500, 510, 320, 240, 0.0578, -0.0805, -0.00098, 0.00016};
-  }
-  return {};
-}
+using camera_models_test::ExampleParams;
+using camera_models_test::kImageHeight;
+using camera_models_test::kImageWidth;
 
-class CameraModelTest : public ::testing::TestWithParam<int> {};
+class CameraModelTest : public ::testing::TestWithParam<CameraModelId> {};
 
 TEST_P(CameraModelTest, UnprojectInvertsProject) {
-  const auto id = static_cast<CameraModelId>(GetParam());
+  const CameraModelId id = GetParam();
   const auto params = ExampleParams(id);
   ASSERT_EQ(static_cast<int>(params.size()), CameraModelNumParams(id));
   VisitCameraModel(id, [&](auto model) {
@@ -40,15 +38,53 @@ TEST_P(CameraModelTest, UnprojectInvertsProject) {
   });
 }
 
+// Random pixels of the image: unprojected (the undistortion converges) and projected again,
+// they land on themselves; random points in front of the camera that are seen in the image:
+// projected and unprojected, they come back on the normalised plane. Both to 1e-9 relative.
+TEST_P(CameraModelTest, RoundTripsOnRandomPoints) {
+  const CameraModelId id = GetParam();
+  const auto params = ExampleParams(id);
+  Random random(17 + static_cast<int>(id));
+  VisitCameraModel(id, [&](auto model) {
+    using Model = decltype(model);
+    for (int i = 0; i < 2000; ++i) {
+      const Eigen::Vector2d pixel(random.UniformReal(0.0, kImageWidth),
+                                  random.UniformReal(0.0, kImageHeight));
+      Eigen::Vector2d uv;
+      ASSERT_TRUE(Model::CamFromImgChecked(params.data(), pixel.x(), pixel.y(), &uv))
+          << Model::kName << " pixel " << pixel.transpose();
+      const double depth = random.UniformReal(0.5, 20.0);
+      Eigen::Vector2d back;
+      Model::ImgFromCam(params.data(), depth * uv.x(), depth * uv.y(), depth, &back.x(),
+                        &back.y());
+      EXPECT_LE((back - pixel).norm(), 1e-9 * pixel.norm()) << Model::kName;
+
+      // A point in camera coordinates whose projection is in the image.
+      const Eigen::Vector3d point = depth * Eigen::Vector3d(uv.x(), uv.y(), 1.0);
+      Eigen::Vector2d projected;
+      Model::ImgFromCam(params.data(), point.x(), point.y(), point.z(), &projected.x(),
+                        &projected.y());
+      const Eigen::Vector2d normalised = Model::CamFromImg(params.data(), projected.x(),
+                                                           projected.y());
+      const Eigen::Vector2d expected = point.hnormalized();
+      EXPECT_LE((normalised - expected).norm(), 1e-9 * std::max(1.0, expected.norm()))
+          << Model::kName;
+    }
+  });
+}
+
 TEST_P(CameraModelTest, NameRoundTrips) {
-  const auto id = static_cast<CameraModelId>(GetParam());
+  const CameraModelId id = GetParam();
   EXPECT_EQ(CameraModelFromName(CameraModelName(id)), id);
+  EXPECT_EQ(ParseCameraModel(CameraModelName(id)), id);
+  EXPECT_TRUE(IsKnownCameraModel(static_cast<int>(id)));
+  EXPECT_EQ(static_cast<int>(CameraModelParamNames(id).size()), CameraModelNumParams(id));
 }
 
 // Jacobian of ImgFromCam w.r.t. the point (u, v, w) and the parameters, by automatic
 // differentiation (what bundle adjustment uses), against central finite differences.
 TEST_P(CameraModelTest, ProjectionJacobianMatchesFiniteDifferences) {
-  const auto id = static_cast<CameraModelId>(GetParam());
+  const CameraModelId id = GetParam();
   const auto params = ExampleParams(id);
   VisitCameraModel(id, [&](auto model) {
     using Model = decltype(model);
@@ -83,7 +119,7 @@ TEST_P(CameraModelTest, ProjectionJacobianMatchesFiniteDifferences) {
 // The Jacobian of CamFromImg (unprojection) is the inverse of the projection Jacobian on
 // the normalised plane; checked by finite differences of the unprojection itself.
 TEST_P(CameraModelTest, UnprojectionJacobianInvertsProjectionJacobian) {
-  const auto id = static_cast<CameraModelId>(GetParam());
+  const CameraModelId id = GetParam();
   const auto params = ExampleParams(id);
   VisitCameraModel(id, [&](auto model) {
     using Model = decltype(model);
@@ -111,9 +147,65 @@ TEST_P(CameraModelTest, UnprojectionJacobianInvertsProjectionJacobian) {
   });
 }
 
-INSTANTIATE_TEST_SUITE_P(AllModels, CameraModelTest, ::testing::Range(0, 5));
+INSTANTIATE_TEST_SUITE_P(AllModels, CameraModelTest, ::testing::ValuesIn(kCameraModelIds),
+                         [](const auto& info) { return std::string(CameraModelName(info.param)); });
 
-TEST(CameraModels, UnknownNameIsRejected) { EXPECT_FALSE(CameraModelFromName("FISHEYE_X")); }
+// The ids are COLMAP's (databases and binary models store them), so are the names.
+TEST(CameraModels, IdsAndNamesAreColmaps) {
+  const std::pair<const char*, int> colmap[] = {
+      {"SIMPLE_PINHOLE", 0}, {"PINHOLE", 1},        {"SIMPLE_RADIAL", 2},
+      {"RADIAL", 3},         {"OPENCV", 4},         {"OPENCV_FISHEYE", 5},
+      {"FULL_OPENCV", 6},    {"SIMPLE_RADIAL_FISHEYE", 8}, {"RADIAL_FISHEYE", 9}};
+  for (const auto& [name, id] : colmap) {
+    ASSERT_TRUE(CameraModelFromName(name)) << name;
+    EXPECT_EQ(static_cast<int>(*CameraModelFromName(name)), id) << name;
+  }
+  EXPECT_FALSE(IsKnownCameraModel(7));  // COLMAP's FOV
+  EXPECT_FALSE(IsKnownCameraModel(10));
+  EXPECT_FALSE(IsKnownCameraModel(-1));
+  const std::vector<std::string_view> names = CameraModelParamNames(CameraModelId::kFullOpenCV);
+  const std::vector<std::string_view> expected = {"fx", "fy", "cx", "cy", "k1", "k2",
+                                                  "p1", "p2", "k3", "k4", "k5", "k6"};
+  EXPECT_EQ(names, expected);
+}
+
+TEST(CameraModels, UnknownNameIsRejectedWithTheValidNames) {
+  EXPECT_FALSE(CameraModelFromName("FISHEYE_X"));
+  EXPECT_FALSE(CameraModelFromName("opencv"));  // names are case-sensitive, as in COLMAP
+  try {
+    ParseCameraModel("FOV");
+    FAIL();
+  } catch (const InvalidArgument& e) {
+    const std::string message = e.what();
+    EXPECT_NE(message.find("unknown camera model 'FOV'"), std::string::npos) << message;
+    EXPECT_NE(message.find(CameraModelNameList()), std::string::npos) << message;
+  }
+  EXPECT_EQ(CameraModelNameList(),
+            "SIMPLE_PINHOLE, PINHOLE, SIMPLE_RADIAL, RADIAL, OPENCV, OPENCV_FISHEYE, "
+            "FULL_OPENCV, SIMPLE_RADIAL_FISHEYE, RADIAL_FISHEYE");
+}
+
+// Beyond the radius where barrel distortion folds over, no undistorted point exists: the
+// iteration says so instead of returning a wrong point as if it were right.
+TEST(CameraModels, UndistortionFailsOutsideTheInvertibleDomain) {
+  // r_d = r (1 + k r^2) with k = -0.15 peaks at r = 1 / sqrt(3 * 0.15), r_d = 0.99381.
+  const double k = -0.15;
+  const double peak = (1.0 / std::sqrt(-3.0 * k)) * (2.0 / 3.0);
+  const double simple_radial[] = {100.0, 0.0, 0.0, k};
+  Eigen::Vector2d uv;
+  EXPECT_TRUE(SimpleRadialModel::CamFromImgChecked(simple_radial, 0.6 * 100 * peak,
+                                                   0.78 * 100 * peak, &uv));
+  EXPECT_LT(uv.norm(), 1.0 / std::sqrt(-3.0 * k));  // on the branch before the fold
+  EXPECT_FALSE(SimpleRadialModel::CamFromImgChecked(simple_radial, 0.6 * 100 * peak,
+                                                    0.81 * 100 * peak, &uv));
+  // Equidistant: theta_d = theta (1 + k theta^2) reaches 90 degrees at theta_d = 1.0626.
+  const double fisheye[] = {100.0, 0.0, 0.0, -0.05};
+  const double theta_d_90 = 0.5 * M_PI * (1.0 - 0.05 * 0.25 * M_PI * M_PI);
+  EXPECT_TRUE(SimpleRadialFisheyeModel::CamFromImgChecked(fisheye, 0.0, 99.0 * theta_d_90, &uv));
+  EXPECT_NEAR(std::atan(uv.norm()), 0.5 * M_PI, 0.05);
+  EXPECT_FALSE(
+      SimpleRadialFisheyeModel::CamFromImgChecked(fisheye, 0.0, 101.0 * theta_d_90, &uv));
+}
 
 }  // namespace
 }  // namespace loopsfm

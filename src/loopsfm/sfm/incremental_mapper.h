@@ -56,7 +56,7 @@ struct IncrementalMapperOptions {
   double global_ba_growth = 0.25;
   // Refine focal lengths of cameras whose intrinsics were guessed (no prior focal length).
   bool refine_guessed_focal_length = true;
-  // Refine distortion parameters too (OPENCV, SIMPLE_RADIAL, RADIAL cameras).
+  // Refine distortion parameters too (cameras whose model has any).
   bool refine_extra_params = false;
   // Stop after this many models; models smaller than min_model_size frames are discarded.
   int max_num_models = 10;

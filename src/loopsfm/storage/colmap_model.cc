@@ -103,9 +103,8 @@ void ReadCamerasBinary(const fs::path& dir, ModelBuilder* builder) {
     if (!IsKnownCameraModel(model_id)) {
       throw InputError(
           fmt::format("{}: camera {} uses COLMAP camera model id {}, which loopsfm "
-                      "does not support (supported: SIMPLE_PINHOLE, PINHOLE, "
-                      "SIMPLE_RADIAL, RADIAL, OPENCV)",
-                      in.Where(), camera.camera_id, model_id));
+                      "does not support (supported: {})",
+                      in.Where(), camera.camera_id, model_id, CameraModelNameList()));
     }
     camera.model_id = static_cast<CameraModelId>(model_id);
     const uint64_t width = in.Read<uint64_t>("camera width");

@@ -23,7 +23,7 @@
 // Reading: images are registered; 3D point ids are renumbered 1..N in the order of the
 // file's ids (so ids 1..N are kept); which 3D point an image's 2D point observes is taken
 // from the point tracks (points3D), the ids in the images file are not used. Camera
-// models other than SIMPLE_PINHOLE, PINHOLE, SIMPLE_RADIAL, RADIAL and OPENCV are rejected.
+// models not in sensor/camera_models.h (COLMAP's FOV and thin-prism models) are rejected.
 
 #include <filesystem>
 

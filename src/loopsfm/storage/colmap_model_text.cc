@@ -69,10 +69,8 @@ void ReadCamerasText(const fs::path& dir, ModelBuilder* builder) {
     const auto model = CameraModelFromName(model_name);
     if (!model) {
       throw InputError(
-          fmt::format("{}: camera model '{}' is not supported by loopsfm "
-                      "(supported: SIMPLE_PINHOLE, PINHOLE, SIMPLE_RADIAL, RADIAL, "
-                      "OPENCV)",
-                      in.Where(), model_name));
+          fmt::format("{}: camera model '{}' is not supported by loopsfm (supported: {})",
+                      in.Where(), model_name, CameraModelNameList()));
     }
     camera.model_id = *model;
     for (double p; fields >> p;) camera.params.push_back(p);

@@ -86,8 +86,8 @@ Camera ReadCameraRow(sqlite3_stmt* stmt, const std::string& path) {
   if (!IsKnownCameraModel(model)) {
     throw StorageError(fmt::format(
         "database {}: camera {} uses COLMAP camera model id {}, which loopsfm does not "
-        "support (SIMPLE_PINHOLE, PINHOLE, SIMPLE_RADIAL, RADIAL, OPENCV)",
-        path, camera.camera_id, model));
+        "support (supported: {})",
+        path, camera.camera_id, model, CameraModelNameList()));
   }
   camera.model_id = static_cast<CameraModelId>(model);
   camera.width = sqlite3_column_int(stmt, 2);

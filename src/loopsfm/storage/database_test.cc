@@ -176,6 +176,20 @@ TEST_F(DatabaseTest, CamerasRoundTrip) {
   EXPECT_EQ(params[2], 320.0);
 }
 
+TEST_F(DatabaseTest, EveryCameraModelRoundTrips) {
+  Database db = Database::Open(path_);
+  for (const CameraModelId id : kCameraModelIds) {
+    Camera camera = TestCamera();
+    camera.model_id = id;
+    camera.params.clear();
+    for (int i = 0; i < CameraModelNumParams(id); ++i) camera.params.push_back(900.0 / (i + 1));
+    const auto read = db.ReadCamera(db.WriteCamera(camera));
+    ASSERT_TRUE(read.has_value());
+    EXPECT_EQ(read->model_id, id);
+    EXPECT_TRUE(read->SameIntrinsics(camera)) << camera.ModelName();
+  }
+}
+
 TEST_F(DatabaseTest, FramesAreIdempotentByName) {
   Database db = Database::Open(path_);
   const camera_t camera_id = db.WriteCamera(TestCamera());

@@ -139,6 +139,54 @@ TEST_F(ModelIoTest, TextFilesHaveColmapLines) {
   EXPECT_EQ(points.find("\n5 "), std::string::npos);
 }
 
+// Cameras of every model keep COLMAP's model id (binary) and name (text) and their parameters;
+// COLMAP's FOV model (id 7) is refused with the list of supported models.
+TEST_F(ModelIoTest, EveryCameraModelRoundTripsWithColmapsIdsAndNames) {
+  Reconstruction rec;
+  for (const CameraModelId id : kCameraModelIds) {
+    Camera camera;
+    camera.camera_id = 10 + static_cast<camera_t>(id);
+    camera.model_id = id;
+    camera.width = 1920;
+    camera.height = 1080;
+    for (int i = 0; i < CameraModelNumParams(id); ++i) camera.params.push_back(1000.0 / (i + 3));
+    rec.AddCamera(camera);
+  }
+  WriteColmapModelBinary(dir_ / "bin", rec);
+  WriteColmapModelText(dir_ / "txt", rec);
+  for (const Reconstruction& read :
+       {ReadColmapModelBinary(dir_ / "bin"), ReadColmapModelText(dir_ / "txt")}) {
+    ASSERT_EQ(read.Cameras().size(), kCameraModelIds.size());
+    for (const CameraModelId id : kCameraModelIds) {
+      const Camera& camera = read.GetCamera(10 + static_cast<camera_t>(id));
+      EXPECT_EQ(camera.model_id, id);
+      EXPECT_TRUE(camera.SameIntrinsics(rec.GetCamera(camera.camera_id))) << camera.ModelName();
+    }
+  }
+  // cameras.bin: count, then per camera id (uint32), model id (int32), width, height, params.
+  const std::string cameras = ReadFile(dir_ / "bin" / "cameras.bin");
+  size_t offset = 8;
+  for (const CameraModelId id : kCameraModelIds) {
+    int32_t model_id;
+    std::memcpy(&model_id, cameras.data() + offset + 4, 4);
+    EXPECT_EQ(model_id, static_cast<int>(id));
+    offset += 4 + 4 + 8 + 8 + 8 * CameraModelNumParams(id);
+  }
+  EXPECT_NE(ReadFile(dir_ / "txt" / "cameras.txt")
+                .find("16 FULL_OPENCV 1920 1080 333.3333333333333 250 200"),
+            std::string::npos);
+  std::string fov = cameras;
+  const int32_t fov_id = 7;
+  std::memcpy(fov.data() + 8 + 4, &fov_id, 4);
+  WriteFile(dir_ / "bin" / "cameras.bin", fov);
+  const std::string message = InputErrorOf([&] { ReadColmapModelBinary(dir_ / "bin"); });
+  EXPECT_NE(message.find("COLMAP camera model id 7, which loopsfm does not support (supported: "
+                         "SIMPLE_PINHOLE, PINHOLE, SIMPLE_RADIAL, RADIAL, OPENCV, OPENCV_FISHEYE, "
+                         "FULL_OPENCV, SIMPLE_RADIAL_FISHEYE, RADIAL_FISHEYE)"),
+            std::string::npos)
+      << message;
+}
+
 TEST_F(ModelIoTest, MissingAndCorruptFilesThrowInputError) {
   EXPECT_NE(InputErrorOf([&] { ReadColmapModel(dir_ / "nothing"); }).find("does not exist"),
             std::string::npos);

@@ -126,6 +126,8 @@ cv::Mat RenderFrame(const SyntheticScene& scene, int frame) {
   const Eigen::Matrix3d rotation = world_from_cam.rotation.toRotationMatrix();
   const Eigen::Vector3d center = world_from_cam.translation;
   const double pixel_angle = 1.0 / camera.MeanFocalLength();
+  // The ray through image point (x, y), unprojected through the camera model (so a lens with
+  // distortion renders a distorted frame).
   auto direction = [&](double x, double y) -> Eigen::Vector3d {
     return (rotation * camera.CamFromImg(Eigen::Vector2d(x, y)).homogeneous()).normalized();
   };

@@ -5,7 +5,8 @@
 //   OUTPUT/images/frame_%06d.png   (or OUTPUT/video.mp4 with SynthOptions::video; .jpg with
 //                                   a JPEG quality set)
 //   OUTPUT/groundtruth.txt         name tx ty tz qx qy qz qw per frame, world_from_cam
-//   OUTPUT/intrinsics.txt          PINHOLE width height fx fy cx cy
+//   OUTPUT/intrinsics.txt          PINHOLE width height fx fy cx cy (or the lens's model and
+//                                   parameters, SynthOptions::lens)
 
 #include <filesystem>
 #include <functional>

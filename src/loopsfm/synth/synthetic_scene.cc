@@ -145,6 +145,7 @@ void SynthOptions::Check() const {
   LOOPSFM_REQUIRE_OPTION(focal_length_factor > 0.05 && focal_length_factor < 20.0,
                          "focal_length_factor must be in (0.05, 20), got {}",
                          focal_length_factor);
+  MakeSynthCamera(lens, width, height, focal_length_factor);  // throws for a bad lens
   LOOPSFM_REQUIRE_OPTION(supersampling >= 1 && supersampling <= 8,
                          "supersampling must be between 1 and 8, got {}", supersampling);
   LOOPSFM_REQUIRE_OPTION(cylinder_arc_degrees > 0.0 && cylinder_arc_degrees <= 720.0,
@@ -193,13 +194,8 @@ SyntheticScene MakeScene(const SynthOptions& options) {
   options.Check();
   SyntheticScene scene;
   scene.options = options;
-  scene.camera.camera_id = 1;
-  scene.camera.model_id = CameraModelId::kPinhole;
-  scene.camera.width = options.width;
-  scene.camera.height = options.height;
-  const double focal = options.focal_length_factor * options.width;
-  scene.camera.params = {focal, focal, 0.5 * options.width, 0.5 * options.height};
-  scene.camera.has_prior_focal_length = true;
+  scene.camera =
+      MakeSynthCamera(options.lens, options.width, options.height, options.focal_length_factor);
   if (options.scene == "cylinder") {
     BuildCylinderScene(options, &scene);
   } else {

@@ -14,7 +14,8 @@
 //             by 90 degrees at the corners, hand-held shake (see SynthOptions).
 //
 // Frame degradations (noise, motion blur, haze, dark frames, JPEG) are applied to the
-// rendered frames (frame_degradation.h); the poses are not affected by them.
+// rendered frames (frame_degradation.h); the poses are not affected by them. The lens may
+// distort (lens.h): every pixel's ray is unprojected through the camera model.
 //
 // World coordinates are metres with z up. Poses use OpenCV camera axes (x right, y down,
 // z forward); image coordinates follow COLMAP (the centre of the top-left pixel is (0.5, 0.5)).
@@ -31,6 +32,7 @@
 #include "loopsfm/scene/camera.h"
 #include "loopsfm/scene/dataset_files.h"
 #include "loopsfm/synth/frame_degradation.h"
+#include "loopsfm/synth/lens.h"
 #include "loopsfm/synth/world.h"
 
 namespace loopsfm {
@@ -45,6 +47,9 @@ struct SynthOptions {
   int height = 480;
   // Focal length in pixels as a multiple of the image width (0.9 gives a 58 degree field).
   double focal_length_factor = 0.9;
+  // Lens: camera model and distortion coefficients (see lens.h); the default PINHOLE renders
+  // without distortion. Each pixel's ray goes through the model, so the frames are distorted.
+  LensOptions lens;
   // Rays per pixel along each axis for pixels on an edge (2 means 2x2); 1 turns this off.
   // Other pixels take one ray: their texture is band-limited to the pixel footprint.
   int supersampling = 2;
@@ -85,7 +90,7 @@ struct SynthOptions {
 
 struct SyntheticScene {
   SynthOptions options;
-  // PINHOLE camera shared by all frames.
+  // The camera shared by all frames (MakeSynthCamera): PINHOLE unless options.lens says else.
   Camera camera;
   // Pose of every frame, camera-to-world.
   std::vector<Rigid3d> world_from_cam;
