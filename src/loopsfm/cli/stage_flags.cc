@@ -56,6 +56,11 @@ void AddMatchFlags(CLI::App* cmd, MatchFlags* flags) {
                   "Vocabtree: stop proposing by score when more than this fraction of a "
                   "round's score proposals fail (region growing goes on while it verifies)")
       ->capture_default_str();
+  cmd->add_option("--loop-partners", flags->options.guided.max_loop_partners,
+                  "Vocabtree: stop proposing loop pairs between two frames that both have this "
+                  "many verified partners beyond the sequential window (0: no limit, match "
+                  "every loop pair region growing reaches)")
+      ->capture_default_str();
   cmd->add_option("--similarity-out", flags->options.similarity_path,
                   "Vocabtree: also write the similarity matrix as text (a line of frame names, "
                   "then one row of scores per frame)");

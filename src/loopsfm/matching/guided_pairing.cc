@@ -13,6 +13,8 @@ void GuidedPairingOptions::Check() const {
   LOOPSFM_REQUIRE_OPTION(max_failure_ratio > 0 && max_failure_ratio <= 1,
                          "failure ratio to stop at must be in (0, 1], got {}", max_failure_ratio);
   LOOPSFM_REQUIRE_OPTION(max_rounds >= 1, "at least one round, got {}", max_rounds);
+  LOOPSFM_REQUIRE_OPTION(max_loop_partners >= 0, "loop partners must not be negative, got {}",
+                         max_loop_partners);
   LOOPSFM_REQUIRE_OPTION(min_frame_gap >= 0, "minimum frame gap must not be negative, got {}",
                          min_frame_gap);
 }
@@ -26,8 +28,11 @@ struct IndexPair {
 };
 
 // The k best untried pairs (i < j), best first, ties by index for determinism.
+// `skip(i, j)` leaves a pair out.
+template <typename Skip>
 std::vector<IndexPair> BestUntriedPairs(const Eigen::MatrixXf& scores, const BoolMatrix& tried,
-                                        const BoolMatrix& proposed, int k, int min_gap) {
+                                        const BoolMatrix& proposed, int k, int min_gap,
+                                        const Skip& skip) {
   using Entry = std::pair<float, std::pair<int, int>>;
   // Min-heap of the best k seen so far.
   auto worse = [](const Entry& a, const Entry& b) {
@@ -38,7 +43,7 @@ std::vector<IndexPair> BestUntriedPairs(const Eigen::MatrixXf& scores, const Boo
   const int n = static_cast<int>(scores.rows());
   for (int i = 0; i < n; ++i) {
     for (int j = i + 1 + min_gap; j < n; ++j) {
-      if (tried(i, j) || proposed(i, j)) continue;
+      if (tried(i, j) || proposed(i, j) || skip(i, j)) continue;
       const Entry entry{std::max(scores(i, j), scores(j, i)), {i, j}};
       if (static_cast<int>(heap.size()) < k) {
         heap.push(entry);
@@ -73,6 +78,21 @@ GuidedPairingReport RunGuidedPairing(const Eigen::MatrixXf& scores,
   // score proposals verified, until more than max_failure_ratio of a round's fail.
   int num_by_score = options.num_proposals > 0 ? options.num_proposals : n;
 
+  // Verified partners beyond the sequential window, per frame.
+  std::vector<int> loop_partners(n, 0);
+  for (int i = 0; i < n; ++i) {
+    for (int j = 0; j < n; ++j) {
+      loop_partners[i] += (*verified)(i, j) && std::abs(i - j) > options.min_frame_gap;
+    }
+  }
+  // Proposals of the current round count as partners until verified or not, so one round's
+  // growth along a wide band does not overshoot the limit.
+  std::vector<int> pending(n, 0);
+  auto saturated = [&](int i, int j) {
+    const int k = options.max_loop_partners;
+    return k > 0 && loop_partners[i] + pending[i] >= k && loop_partners[j] + pending[j] >= k;
+  };
+
   // Region growing starts from the first round's verified proposals: pairs verified before
   // (sequential neighbours) would only grow along the diagonal, which sequential matching
   // already covers.
@@ -84,8 +104,12 @@ GuidedPairingReport RunGuidedPairing(const Eigen::MatrixXf& scores,
     auto propose = [&](int i, int j) {
       if (i == j || i < 0 || j < 0 || i >= n || j >= n) return false;
       if (i > j) std::swap(i, j);
-      if ((*tried)(i, j) || proposed(i, j)) return false;
+      if ((*tried)(i, j) || proposed(i, j) || saturated(i, j)) return false;
       proposed(i, j) = true;
+      if (j - i > options.min_frame_gap) {
+        ++pending[i];
+        ++pending[j];
+      }
       proposals.push_back({i, j});
       return true;
     };
@@ -96,7 +120,7 @@ GuidedPairingReport RunGuidedPairing(const Eigen::MatrixXf& scores,
     }
     const size_t first_from_scores = proposals.size();
     if (num_by_score > 0) {
-      for (const IndexPair& p : BestUntriedPairs(scores, *tried, proposed, num_by_score, options.min_frame_gap)) {
+      for (const IndexPair& p : BestUntriedPairs(scores, *tried, proposed, num_by_score, options.min_frame_gap, saturated)) {
         stats.num_from_scores += propose(p.i, p.j);
       }
     }
@@ -107,6 +131,7 @@ GuidedPairingReport RunGuidedPairing(const Eigen::MatrixXf& scores,
     for (const IndexPair& p : proposals) pairs.emplace_back(image_ids[p.i], image_ids[p.j]);
     const std::vector<bool> ok = verify(pairs);
     LOOPSFM_CHECK(ok.size() == pairs.size());
+    std::fill(pending.begin(), pending.end(), 0);
     last_verified.clear();
     for (size_t m = 0; m < proposals.size(); ++m) {
       const IndexPair& p = proposals[m];
@@ -114,6 +139,10 @@ GuidedPairingReport RunGuidedPairing(const Eigen::MatrixXf& scores,
       if (ok[m]) {
         (*verified)(p.i, p.j) = (*verified)(p.j, p.i) = true;
         last_verified.push_back(p);
+        if (p.j - p.i > options.min_frame_gap) {
+          ++loop_partners[p.i];
+          ++loop_partners[p.j];
+        }
         ++stats.num_verified;
         stats.num_verified_from_scores += m >= first_from_scores;
       }

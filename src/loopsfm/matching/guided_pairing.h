@@ -15,7 +15,8 @@
 // matching (bench/guided_matching/policy_sim.py): a fixed k with the stop rule applied to all
 // of a round's proposals matched 16248 pairs for 96.5 % of exhaustive's 12734 verified pairs;
 // this rule matches 13796 for 99.7 %. Proposals by score skip pairs closer in time than
-// min_frame_gap (the sequential part has tried them).
+// min_frame_gap (the sequential part has tried them), and no pair is proposed whose two
+// frames already have max_loop_partners loop partners each.
 
 #include <functional>
 #include <vector>
@@ -33,6 +34,11 @@ struct GuidedPairingOptions {
   // Score proposals skip pairs at most this many frames apart: the sequential part covers
   // them, and their failures would stop the search for loops (0: none skipped).
   int min_frame_gap = 0;
+  // A frame with this many verified partners beyond min_frame_gap is linked to the other
+  // passes well enough: a proposal whose two frames both have as many is skipped, so a wide
+  // loop band is thinned to a few pairs per frame instead of matched whole (0: no limit,
+  // every pair region growing reaches is tried, for recall against exhaustive matching).
+  int max_loop_partners = 5;
   // Stop proposing by score when more than this fraction of a round's score proposals fail.
   double max_failure_ratio = 0.7;
   // Safety bound on the number of rounds.
