@@ -10,6 +10,7 @@ Three columns per set:
 
 For each: models, frames in the largest model, trajectory error of the largest model (ATE RMSE,
 ATE as % of the ground-truth path length, mean rotation error; all scored by `loopsfm eval`),
+the camera the largest model ended with (focal length and k1 against the set's intrinsics.txt),
 per-stage wall times, peak memory, pairs tried and verified, and the largest connected component
 of the verified-pair graph. With --runs N every number is the median of N runs. Standard library
 only; see README.md beside this file.
@@ -28,6 +29,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
+from vsc_camera import read_intrinsics_file  # noqa: E402
 from vsc_sets import (ALL_SETS, DEFAULT_SETS, colmap_images, known_sets,  # noqa: E402
                       make_set)
 from vsc_tools import (MIN_INLIERS, load_average, log, run_colmap,  # noqa: E402
@@ -45,7 +47,8 @@ TITLES = {"loopsfm": "loopsfm", "colmap": "COLMAP full",
 NUMERIC_KEYS = ["extraction_s", "matching_s", "mapping_s", "total_s", "vocab_tree_s", "peak_mib",
                 "registered", "models", "gt_frames", "ate_rmse", "ate_pct", "rot_mean_deg",
                 "pairs_tried", "pairs_verified", "component_largest", "components",
-                "features_per_image", "db_images", "load_1min"]
+                "features_per_image", "db_images", "load_1min", "focal_est", "focal_true",
+                "focal_err_pct", "k1_est", "k1_true", "k1_abs_err"]
 
 
 # ----------------------------------------------------------------------------------------------
@@ -62,6 +65,8 @@ def median_of(runs):
     notes = sorted({r.get("eval_note", "") for r in runs} - {""})
     merged["eval_note"] = "; ".join(notes)
     merged["loop_detection"] = any(r.get("loop_detection") for r in runs) if runs else None
+    models = sorted({r["camera_model"] for r in runs if r.get("camera_model")})
+    merged["camera_model"] = ", ".join(models) or None
     return merged
 
 
@@ -97,7 +102,12 @@ def bench_one_set(args, bench_set, workdir):
     elif colmap_matcher == "sequential":
         colmap_matcher += (" + loop detection" if median_of(runs["colmap"])["loop_detection"]
                            else " (no loop detection)")
+    try:
+        true_camera_model = read_intrinsics_file(bench_set.intrinsics)[0]
+    except (OSError, ValueError):
+        true_camera_model = None
     result = dict(bench_set.describe(), runs=args.runs, colmap_matcher=colmap_matcher,
+                  true_camera_model=true_camera_model,
                   intrinsics_mode="estimated" if args.no_intrinsics else "given",
                   frame_extraction_s=frame_extraction_s, per_run=runs)
     for tool in TOOLS:
@@ -122,6 +132,36 @@ def fmt_of(part, whole):
     return f"{part:g} / {whole:g}" if whole is not None else f"{part:g}"
 
 
+def fmt_focal(s):
+    """'1523.1 (+0.2 %)': estimated focal length [px] and its signed error against the truth."""
+    if s["focal_est"] is None:
+        return "-"
+    if s["focal_err_pct"] is None:
+        return f"{s['focal_est']:.1f}"
+    return f"{s['focal_est']:.1f} ({s['focal_err_pct']:+.1f} %)"
+
+
+def fmt_k1(s):
+    """'-0.0412 (0.0088)': estimated k1 and its absolute error against the truth."""
+    if s["k1_est"] is None:
+        return "-"
+    if s["k1_abs_err"] is None:
+        return f"{s['k1_est']:.4f}"
+    return f"{s['k1_est']:.4f} ({s['k1_abs_err']:.4f})"
+
+
+def fmt_truth(result):
+    """The set's true camera for the caption: model, focal length, k1."""
+    true = next((result[t] for t in TOOLS if result[t].get("focal_true") is not None), None)
+    if true is None:
+        return "true camera: unknown"
+    text = (f"true camera: {result.get('true_camera_model') or '?'}, "
+            f"focal {true['focal_true']:.1f} px")
+    if true.get("k1_true") is not None:
+        text += f", k1 {true['k1_true']:.4f}"
+    return text
+
+
 def table_rows():
     """(label, formatter of one column's medians) per row: first the comparison (models to
     largest connected component), then context."""
@@ -131,6 +171,9 @@ def table_rows():
          lambda s: fmt_of(s["registered"], s["gt_frames"])),
         ("ATE [% of path length]", lambda s: fmt_num(s["ate_pct"], 3)),
         ("rotation error, mean [deg]", lambda s: fmt_num(s["rot_mean_deg"], 3)),
+        ("camera model (largest model)", lambda s: s["camera_model"] or "-"),
+        ("focal [px] (error %)", fmt_focal),
+        ("k1 (abs. error)", fmt_k1),
         ("map [s]", lambda s: fmt_num(s["mapping_s"])),
         ("total [s]", lambda s: fmt_num(s["total_s"])),
         ("pairs tried", lambda s: fmt_num(s["pairs_tried"], 0)),
@@ -153,7 +196,8 @@ def format_table(result, tools):
     runs = result["runs"]
     lines = [f"### {result['set']}", "",
              f"{result['origin']}; intrinsics {result['intrinsics_mode']}; COLMAP matcher: "
-             f"{result['colmap_matcher']}; {'median of ' + str(runs) + ' runs' if runs > 1 else '1 run'}.",
+             f"{result['colmap_matcher']}; {'median of ' + str(runs) + ' runs' if runs > 1 else '1 run'}; "
+             f"{fmt_truth(result)}.",
              ""]
     columns = [t for t in TOOLS if t in tools]
     lines.append("| | " + " | ".join(TITLES[t] for t in columns) + " |")

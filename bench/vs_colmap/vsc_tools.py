@@ -12,6 +12,8 @@ import sys
 import time
 from pathlib import Path
 
+from vsc_camera import camera_vs_truth, read_intrinsics_file
+
 # COLMAP's pair ids: pair_id = image_id1 * PAIR_ID_BASE + image_id2 with image_id1 < image_id2.
 PAIR_ID_BASE = 2147483647
 # Fewest inliers for a verified pair to join frames in the view graph (both tools' minimum,
@@ -95,14 +97,20 @@ def largest_model(sparse_dir):
     return max(models, key=lambda m: m[0])[1], len(models)
 
 
-def evaluate(args, sparse_dir, groundtruth, log_path):
-    """Scores the largest model in sparse_dir with `loopsfm eval --json`."""
+def evaluate(args, sparse_dir, bench_set, log_path):
+    """Scores the largest model in sparse_dir: its trajectory with `loopsfm eval --json`, its
+    camera against the set's intrinsics.txt (vsc_camera.camera_vs_truth)."""
+    groundtruth = bench_set.groundtruth
     result = {"registered": 0, "models": 0, "gt_frames": None, "ate_rmse": None,
               "ate_pct": None, "rot_mean_deg": None, "eval_note": ""}
     result["gt_frames"] = sum(1 for l in groundtruth.read_text().splitlines()
                               if l.strip() and not l.startswith("#"))
     model, num_models = largest_model(sparse_dir)
     result["models"] = num_models
+    try:
+        result.update(camera_vs_truth(model, bench_set.intrinsics))
+    except (OSError, ValueError, struct.error) as error:
+        log(f"warning: cannot read the camera of {model}: {error}")
     if model is None:
         result["eval_note"] = "no model"
         return result
@@ -239,7 +247,7 @@ def run_loopsfm(args, bench_set, run_dir):
     if proc["rc"] != 0:
         log(f"{bench_set.name}: loopsfm failed (rc {proc['rc']}), see {proc['log']}")
     result.update(database_stats(out_dir / "out" / "database.db"))
-    result.update(evaluate(args, out_dir / "out" / "sparse", bench_set.groundtruth,
+    result.update(evaluate(args, out_dir / "out" / "sparse", bench_set,
                            out_dir / "eval.json"))
     log(f"{bench_set.name}: loopsfm {result['total_s']:.1f} s, "
         f"{result['registered']}/{result['gt_frames']} registered")
@@ -255,38 +263,35 @@ def colmap_threads(args):
 
 
 def read_intrinsics(path):
-    """Returns (model, [params]) from 'PINHOLE w h fx fy cx cy' or 'OPENCV w h fx fy cx cy k1..p2'."""
-    for line in path.read_text().splitlines():
-        line = line.strip()
-        if not line or line.startswith("#"):
-            continue
-        fields = line.replace(",", " ").split()
-        model, values = fields[0].upper(), fields[3:]
-        expected = {"PINHOLE": 4, "OPENCV": 8}.get(model)
-        if expected is None or len(values) != expected:
-            raise ValueError(f"{path}: cannot read camera line '{line}'")
-        return model, values
-    raise ValueError(f"{path}: no camera line")
+    """Returns (model, [params as text]) from the set's intrinsics.txt line 'MODEL w h params...'
+    (any COLMAP model, its parameter order), for COLMAP's --ImageReader.camera_params."""
+    model, _, _, params = read_intrinsics_file(path)
+    return model, [repr(p) for p in params]
 
 
 def mapper_command(args, db, image_dir, sparse_dir):
     """`colmap mapper`, the same for both COLMAP columns. With intrinsics they stay fixed (as in
-    loopsfm); with --no-intrinsics COLMAP refines focal length and distortion (its defaults)."""
+    loopsfm); with --no-intrinsics COLMAP refines focal length and distortion, principal point
+    fixed (its defaults, spelled out)."""
     cmd = [args.colmap, "mapper", "--database_path", db, "--image_path", image_dir,
            "--output_path", sparse_dir, "--Mapper.num_threads", colmap_threads(args)]
-    if not args.no_intrinsics:
-        cmd += ["--Mapper.ba_refine_focal_length", "0", "--Mapper.ba_refine_principal_point", "0",
-                "--Mapper.ba_refine_extra_params", "0"]
+    refine = "1" if args.no_intrinsics else "0"
+    cmd += ["--Mapper.ba_refine_focal_length", refine, "--Mapper.ba_refine_principal_point", "0",
+            "--Mapper.ba_refine_extra_params", refine]
     return cmd
 
 
 def extractor_command(args, bench_set, db, image_dir):
     """`colmap feature_extractor`: one camera for the set; the set's model and intrinsics, or
-    with --no-intrinsics COLMAP's default SIMPLE_RADIAL with its focal length guess."""
+    with --no-intrinsics COLMAP's default SIMPLE_RADIAL with no parameters given."""
     cmd = [args.colmap, "feature_extractor", "--database_path", db, "--image_path", image_dir,
            "--ImageReader.single_camera", "1", "--SiftExtraction.use_gpu", "0",
            "--SiftExtraction.num_threads", colmap_threads(args)]
-    if not args.no_intrinsics:
+    if args.no_intrinsics:
+        # COLMAP's default for unknown intrinsics, spelled out; no parameters: its focal guess
+        # (from EXIF, else 1.2 x max(width, height)), principal point at the centre, k = 0.
+        cmd += ["--ImageReader.camera_model", "SIMPLE_RADIAL"]
+    else:
         model, params = read_intrinsics(bench_set.intrinsics)
         cmd += ["--ImageReader.camera_model", model, "--ImageReader.camera_params",
                 ",".join(params)]
@@ -373,7 +378,7 @@ def run_colmap(args, bench_set, image_dir, run_dir):
     result["total_s"] = sum(s for s in stage_s if s is not None)
     result["peak_mib"] = max(result["stage_peak_mib"].values())
     result.update(database_stats(db))
-    result.update(evaluate(args, out_dir / "sparse", bench_set.groundtruth, out_dir / "eval.json"))
+    result.update(evaluate(args, out_dir / "sparse", bench_set, out_dir / "eval.json"))
     log(f"{bench_set.name}: colmap {result['total_s']:.1f} s, "
         f"{result['registered']}/{result['gt_frames']} registered")
     return result
@@ -408,7 +413,7 @@ def run_colmap_on_loopsfm_db(args, bench_set, image_dir, run_dir, loopsfm_result
     front = [result["extraction_s"], result["matching_s"]]
     result["total_s"] = (sum(front) + proc["wall_s"]) if None not in front else None
     result.update(database_stats(db))
-    result.update(evaluate(args, out_dir / "sparse", bench_set.groundtruth, out_dir / "eval.json"))
+    result.update(evaluate(args, out_dir / "sparse", bench_set, out_dir / "eval.json"))
     log(f"{bench_set.name}: colmap mapper on loopsfm's db {proc['wall_s']:.1f} s, "
         f"{result['registered']}/{result['gt_frames']} registered")
     return result
