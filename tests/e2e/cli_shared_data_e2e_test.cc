@@ -7,7 +7,7 @@
 //   templeRing, exhaustive pairs, known intrinsics: 47 / 47 registered, ATE 0.025 % of the
 //     path length, rotation error mean 0.14 deg; 35 s. `colmap mapper` on our database:
 //     47 / 47, ATE 0.045 %, in 73 s.
-//   kitti07_160, sequential pairs, known intrinsics: 160 / 160 registered, ATE 0.51 % of
+//   kitti07_160, default pairs, known intrinsics: 160 / 160 registered, ATE 0.51 % of
 //     the path length (0.46 m of 90.6 m), rotation error mean 0.44 deg; 2.5 min of CPU,
 //     up to 6 min of wall time on a busy machine.
 //   fox, default flags, known intrinsics: 67 / 67 in one model, ATE 0.0075 % of the path,

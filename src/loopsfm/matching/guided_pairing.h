@@ -34,8 +34,8 @@ struct GuidedPairingOptions {
   // Score proposals skip pairs at most this many frames apart: the sequential part covers
   // them, and their failures would stop the search for loops (0: none skipped).
   int min_frame_gap = 0;
-  // A frame with this many verified partners beyond min_frame_gap is linked to the other
-  // passes well enough: a proposal whose two frames both have as many is skipped, so a wide
+  // A frame with this many partners beyond min_frame_gap verified by this pairing (pairs
+  // verified before it do not count) is linked to the other passes well enough: a proposal whose two frames both have as many is skipped, so a wide
   // loop band is thinned to a few pairs per frame instead of matched whole (0: no limit,
   // every pair region growing reaches is tried, for recall against exhaustive matching).
   int max_loop_partners = 5;
