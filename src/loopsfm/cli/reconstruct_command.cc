@@ -13,20 +13,50 @@ void PrintSummary(const ReconstructReport& report) {
   out += fmt::format("{:<28}{}\n", "frames", report.num_frames);
   for (size_t m = 0; m < report.models.size(); ++m) {
     const ModelSummary& s = report.models[m];
-    out += fmt::format("{:<28}{} registered, {} points, track length {:.2f}, reprojection "
+    out += fmt::format("{:<28} {} registered, {} points, track length {:.2f}, reprojection "
                        "error {:.3f} px\n",
                        fmt::format("model {} ({})", m, s.path.string()), s.num_registered,
                        s.num_points, s.mean_track_length, s.mean_reprojection_error);
   }
   if (report.models.empty()) out += fmt::format("{:<28}{}\n", "models", "none");
+  for (const CameraSelfCalibration& c : report.self_calibration.cameras) {
+    out += fmt::format("{:<28}", fmt::format("self-calibration camera {}", c.camera_id));
+    if (c.applied) {
+      out += fmt::format("focal {:.1f} px, spread {:.2f} %, {} of {} pairs agree\n", c.focal_px,
+                         100.0 * c.estimate.spread, c.estimate.num_pairs_inlier,
+                         c.estimate.num_pairs);
+    } else {
+      out += fmt::format("kept the guess {:.1f} px: {}\n", c.initial_focal_px,
+                         c.estimate.explanation);
+    }
+  }
+  if (!report.models.empty()) {
+    for (const Camera& camera : report.models[0].cameras) {
+      std::string params;
+      for (double p : camera.params) params += fmt::format(" {:.6g}", p);
+      out += fmt::format("{:<28}{} {}x{}{}\n", fmt::format("model 0 camera {}", camera.camera_id),
+                         camera.ModelName(), camera.width, camera.height, params);
+    }
+  }
   for (const StageTime& t : report.stage_times) {
     out += fmt::format("{:<28}{:.1f} s\n", "time " + t.stage, t.seconds);
   }
   const MapperReport& m = report.mapper;
   out += fmt::format("{:<28}registration {:.1f} s, triangulation {:.1f} s, {} local BA {:.1f} s, "
-                     "{} global BA {:.1f} s\n",
+                     "{} global BA {:.1f} s, merging {:.1f} s\n",
                      "  of which", m.seconds_registration, m.seconds_triangulation, m.num_local_ba,
-                     m.seconds_local_ba, m.num_global_ba, m.seconds_global_ba);
+                     m.seconds_local_ba, m.num_global_ba, m.seconds_global_ba, m.seconds_merging);
+  auto per = [](long long total, int count) { return count > 0 ? double(total) / count : 0.0; };
+  out += fmt::format("{:<28}local BA {:.1f} iterations, {:.0f} residuals; global BA {:.1f} "
+                     "iterations, {:.0f} residuals (means)\n",
+                     "  bundles", per(m.num_local_ba_iterations, m.num_local_ba),
+                     per(m.num_local_ba_residuals, m.num_local_ba),
+                     per(m.num_global_ba_iterations, m.num_global_ba),
+                     per(m.num_global_ba_residuals, m.num_global_ba));
+  out += fmt::format("{:<28}{} initial pairs tried ({} accepted), {} registered on a retry, {} "
+                     "models merged, {} discarded, {} failed bundles\n",
+                     "  mapper", m.num_init_trials, m.num_init_accepted, m.num_registered_on_retry,
+                     m.num_models_merged, m.num_models_discarded, m.num_failed_bundles);
   out += fmt::format("{:<28}{:.1f} s, peak memory {:.0f} MiB\n", "total", report.total_seconds,
                      report.peak_memory_bytes / 1048576.0);
   std::fputs(out.c_str(), stdout);
@@ -40,6 +70,8 @@ void AddReconstructCommand(CLI::App& app) {
     ExtractFlags extract;
     MatchFlags match;
     bool text = false;
+    bool no_self_calibration = false;
+    std::string refine;
   };
   auto flags = std::make_shared<Flags>();
   CLI::App* cmd = app.add_subcommand(
@@ -53,11 +85,23 @@ void AddReconstructCommand(CLI::App& app) {
   AddExtractFlags(cmd, &flags->extract);
   AddMatchFlags(cmd, &flags->match);
   cmd->add_flag("--text", flags->text, "Also write the COLMAP model as .txt files");
+  cmd->add_option("--refine", flags->refine,
+                  "Intrinsics that global bundle adjustment refines, for every camera: any of "
+                  "focal,principal-point,distortion or none (default: focal,distortion without "
+                  "--intrinsics, none with)");
+  cmd->add_flag("--no-self-calibration", flags->no_self_calibration,
+                "Without --intrinsics, start mapping from the guessed focal length (1.2 x the "
+                "image size) instead of estimating it from the pairs' fundamental matrices");
   cmd->callback([flags] {
     ReconstructOptions options;
     options.extract = flags->extract.Resolve();
     options.match = flags->match.Resolve();
     options.mapper.num_threads = Common().threads;
+    if (!flags->refine.empty()) {
+      options.mapper.refine_known = options.mapper.refine_unknown =
+          IntrinsicsRefinement::Parse(flags->refine);
+    }
+    options.self_calibrate = !flags->no_self_calibration;
     options.write_text = flags->text;
     options.show_progress = !Common().quiet;
     const ReconstructReport report = Reconstruct(flags->input, flags->output, options);

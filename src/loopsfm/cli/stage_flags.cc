@@ -11,7 +11,12 @@ namespace loopsfm::cli {
 
 void AddExtractFlags(CLI::App* cmd, ExtractFlags* flags) {
   cmd->add_option("--intrinsics", flags->intrinsics,
-                  "Camera file: 'PINHOLE w h fx fy cx cy' or 'OPENCV w h fx fy cx cy k1 k2 p1 p2'");
+                  "Known camera, one line 'MODEL width height params...' in COLMAP's order, e.g. "
+                  "'PINHOLE 1920 1080 1500 1500 960 540' (held fixed unless --refine says "
+                  "otherwise); without it the focal length is self-calibrated");
+  cmd->add_option("--camera-model", flags->camera_model,
+                  "Camera model without --intrinsics (default SIMPLE_RADIAL): " +
+                      CameraModelNameList());
   cmd->add_option("--every", flags->options.keyframes.every,
                   "Keep one frame in N (the sharpest of each window)")
       ->capture_default_str();
@@ -32,6 +37,15 @@ ExtractOptions ExtractFlags::Resolve() const {
   resolved.num_threads = Common().threads;
   resolved.show_progress = !Common().quiet;
   if (!intrinsics.empty()) resolved.intrinsics = ReadIntrinsicsFile(intrinsics);
+  if (!camera_model.empty()) {
+    resolved.camera_model = ParseCameraModel(camera_model);
+    if (resolved.intrinsics && resolved.intrinsics->model_id != resolved.camera_model) {
+      throw InvalidArgument(fmt::format(
+          "--camera-model {} disagrees with the {} camera of --intrinsics '{}'; the intrinsics "
+          "file names its model, drop --camera-model", camera_model,
+          resolved.intrinsics->ModelName(), intrinsics));
+    }
+  }
   resolved.Check();
   return resolved;
 }

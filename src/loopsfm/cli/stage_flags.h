@@ -13,6 +13,7 @@ namespace loopsfm::cli {
 
 struct ExtractFlags {
   std::string intrinsics;
+  std::string camera_model;
   ExtractOptions options;
   bool first_of_window = false;
   bool no_root_sift = false;

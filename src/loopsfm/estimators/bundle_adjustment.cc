@@ -48,6 +48,54 @@ std::vector<int> ConstantCameraParams(CameraModelId model_id,
   });
 }
 
+// Camera parameters with some held constant and, with tie_focal, fy tied to fx: a step d of
+// the focal length moves fx by d and fy by d * fy / fx, so fy / fx never changes. The tangent
+// space has one coordinate per free parameter (fx standing for both focal lengths).
+class CameraParamsManifold : public ceres::Manifold {
+ public:
+  CameraParamsManifold(int num_params, const std::vector<int>& constant, bool tie_focal)
+      : num_params_(num_params), tie_focal_(tie_focal) {
+    for (int i = 0; i < num_params; ++i) {
+      const bool is_constant = std::find(constant.begin(), constant.end(), i) != constant.end();
+      if (!is_constant && !(tie_focal && i == 1)) free_.push_back(i);
+    }
+  }
+  int AmbientSize() const override { return num_params_; }
+  int TangentSize() const override { return static_cast<int>(free_.size()); }
+  bool Plus(const double* x, const double* delta, double* x_plus_delta) const override {
+    std::copy(x, x + num_params_, x_plus_delta);
+    for (size_t k = 0; k < free_.size(); ++k) {
+      x_plus_delta[free_[k]] += delta[k];
+      if (tie_focal_ && free_[k] == 0) x_plus_delta[1] += delta[k] * x[1] / x[0];
+    }
+    return true;
+  }
+  bool PlusJacobian(const double* x, double* jacobian) const override {
+    const int tangent = TangentSize();
+    std::fill(jacobian, jacobian + num_params_ * tangent, 0.0);
+    for (int k = 0; k < tangent; ++k) {
+      jacobian[free_[k] * tangent + k] = 1.0;
+      if (tie_focal_ && free_[k] == 0) jacobian[1 * tangent + k] = x[1] / x[0];
+    }
+    return true;
+  }
+  bool Minus(const double* y, const double* x, double* y_minus_x) const override {
+    for (size_t k = 0; k < free_.size(); ++k) y_minus_x[k] = y[free_[k]] - x[free_[k]];
+    return true;
+  }
+  bool MinusJacobian(const double*, double* jacobian) const override {
+    const int tangent = TangentSize();
+    std::fill(jacobian, jacobian + num_params_ * tangent, 0.0);
+    for (int k = 0; k < tangent; ++k) jacobian[k * num_params_ + free_[k]] = 1.0;
+    return true;
+  }
+
+ private:
+  int num_params_;
+  bool tie_focal_;
+  std::vector<int> free_;
+};
+
 std::optional<ceres::SparseLinearAlgebraLibraryType> AvailableSparseLibrary() {
   for (const auto type : {ceres::SUITE_SPARSE, ceres::EIGEN_SPARSE, ceres::CX_SPARSE}) {
     if (ceres::IsSparseLinearAlgebraLibraryTypeAvailable(type)) return type;
@@ -60,6 +108,7 @@ std::optional<ceres::SparseLinearAlgebraLibraryType> AvailableSparseLibrary() {
 BundleAdjustmentOptions BundleAdjustmentOptions::Local() {
   BundleAdjustmentOptions options;
   options.max_num_iterations = 25;
+  options.max_constant_observations_per_point = 8;
   return options;
 }
 
@@ -73,6 +122,9 @@ void BundleAdjustmentOptions::Check() const {
   LOOPSFM_REQUIRE_OPTION(loss_function_scale > 0.0,
                          "bundle adjustment: loss_function_scale must be > 0 (got {})",
                          loss_function_scale);
+  LOOPSFM_REQUIRE_OPTION(max_constant_observations_per_point >= 0,
+                         "bundle adjustment: max_constant_observations_per_point must be >= 0 (got {})",
+                         max_constant_observations_per_point);
   LOOPSFM_REQUIRE_OPTION(max_num_iterations >= 0,
                          "bundle adjustment: max_num_iterations must be >= 0 (got {})",
                          max_num_iterations);
@@ -238,10 +290,21 @@ void BundleAdjuster::AddImage(image_t image_id) {
 void BundleAdjuster::AddPoint(point3D_t point3D_id, bool constant) {
   Point3D& point = reconstruction_->GetPoint3D(point3D_id);
   points_added_.insert(point3D_id);
+  // Observations by registered images outside the config (added with constant poses).
+  std::vector<const TrackElement*> outside;
   for (const TrackElement& element : point.track.elements) {
     if (config_.HasImage(element.image_id)) continue;  // added with its image
+    if (reconstruction_->GetImage(element.image_id).registered) outside.push_back(&element);
+  }
+  const size_t cap = options_.max_constant_observations_per_point;
+  const size_t num_kept = constant || cap == 0 ? outside.size() : std::min(cap, outside.size());
+  for (size_t k = 0; k < num_kept; ++k) {
+    // Evenly spread over the track: both ends of a long track stay represented.
+    const size_t index = num_kept == outside.size() ? k
+                         : num_kept == 1            ? outside.size() / 2
+                                         : k * (outside.size() - 1) / (num_kept - 1);
+    const TrackElement& element = *outside[index];
     const Image& image = reconstruction_->GetImage(element.image_id);
-    if (!image.registered) continue;
     Camera& camera = reconstruction_->GetCamera(image.camera_id);
     LOOPSFM_CHECK_EQ(static_cast<int>(camera.params.size()), CameraModelNumParams(camera.model_id));
     cameras_added_.insert(image.camera_id);
@@ -265,9 +328,19 @@ void BundleAdjuster::ParameterizeCameras() {
     if (config_cameras_.count(camera_id) == 0 || config_.HasConstantCamera(camera_id) ||
         all_constant) {
       problem_->SetParameterBlockConstant(params);
-    } else if (!constant.empty()) {
-      problem_->SetManifold(
-          params, new ceres::SubsetManifold(static_cast<int>(camera.params.size()), constant));
+    } else {
+      const bool two_focal = VisitCameraModel(
+          camera.model_id, [](auto model) { return decltype(model)::kNumFocal == 2; });
+      const bool tie_focal = two_focal && options_.refine_focal_length &&
+                             options_.keep_aspect_ratio_of_unknown_cameras &&
+                             !camera.has_prior_focal_length;
+      if (tie_focal) {
+        problem_->SetManifold(params, new CameraParamsManifold(
+                                          static_cast<int>(camera.params.size()), constant, true));
+      } else if (!constant.empty()) {
+        problem_->SetManifold(
+            params, new ceres::SubsetManifold(static_cast<int>(camera.params.size()), constant));
+      }
     }
   }
 }

@@ -48,6 +48,16 @@ struct BundleAdjustmentOptions {
   bool refine_principal_point = false;
   // Refine the distortion parameters of the camera model.
   bool refine_extra_params = false;
+  // For cameras without a prior focal length whose model has fx and fy: refine them as one
+  // focal length, fx / fy held at its initial value (square pixels for a guessed camera; an
+  // unconstrained aspect ratio drifts with the scene's structure). Cameras with a prior
+  // refine fx and fy separately, as COLMAP does.
+  bool keep_aspect_ratio_of_unknown_cameras = true;
+  // Observations of a variable point by images outside the config (constant poses) that
+  // enter the problem, at most, spread evenly over its track (0: all). They only anchor the
+  // point; a long track's dozens of them cost residuals without constraining the local
+  // bundle more.
+  int max_constant_observations_per_point = 0;
   // Levenberg-Marquardt iterations (COLMAP: 100 for global, 25 for local bundles).
   int max_num_iterations = 100;
   // Stop when the relative cost decrease of a step falls below this.
@@ -69,7 +79,8 @@ struct BundleAdjustmentOptions {
   // Print Ceres' per-iteration progress to stdout (debugging only).
   bool print_progress = false;
 
-  // Defaults for the local bundle after each registration (fewer iterations).
+  // Defaults for the local bundle after each registration (fewer iterations, at most 8
+  // anchoring observations per point).
   static BundleAdjustmentOptions Local();
   // Defaults for the global bundle.
   static BundleAdjustmentOptions Global();

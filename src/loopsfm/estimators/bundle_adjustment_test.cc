@@ -268,6 +268,36 @@ TEST_P(BundleAdjustmentModelTest, RefinesFocalLengthAndDistortion) {
   EXPECT_LT(MeanReprojectionError(reconstruction), 1e-6);
 }
 
+// fx and fy of a camera without a prior move together (fy / fx stays as it was); with a
+// prior they are refined separately and both recovered.
+TEST(BundleAdjustment, KeepsTheAspectRatioOfUnknownCameras) {
+  const Reconstruction truth = MakeArcScene(CameraModelId::kPinhole, 12, 400, 3);
+  for (const bool prior : {false, true}) {
+    Reconstruction reconstruction = truth;
+    Perturb(&reconstruction, {1, 2}, 0.5, 0.02, 0.02, 4);
+    Camera& camera = reconstruction.GetCamera(1);
+    camera.has_prior_focal_length = prior;
+    camera.params[0] *= 1.05;
+    camera.params[1] *= 1.03;
+    const double ratio = camera.params[1] / camera.params[0];
+    BundleAdjustmentOptions options;
+    options.refine_focal_length = true;
+    BundleAdjuster adjuster(options, GaugeFixedConfig(truth));
+    ASSERT_TRUE(adjuster.Solve(&reconstruction)) << adjuster.FullReport();
+    const std::vector<double>& refined = reconstruction.GetCamera(1).params;
+    const std::vector<double>& expected = truth.GetCamera(1).params;
+    if (prior) {
+      EXPECT_LT(std::abs(refined[0] / expected[0] - 1.0), 1e-3);
+      EXPECT_LT(std::abs(refined[1] / expected[1] - 1.0), 1e-3);
+    } else {
+      EXPECT_NEAR(refined[1] / refined[0], ratio, 1e-12);
+      // The shared focal length moved towards the truth, between the two true values.
+      EXPECT_LT(std::abs(refined[0] / expected[0] - 1.0), 0.03);
+      EXPECT_GT(MeanReprojectionError(reconstruction), 1e-3) << "fy cannot reach the truth";
+    }
+  }
+}
+
 INSTANTIATE_TEST_SUITE_P(Models, BundleAdjustmentModelTest,
                          ::testing::Values(CameraModelId::kPinhole, CameraModelId::kSimpleRadial));
 
@@ -387,7 +417,9 @@ TEST(BundleAdjustment, LocalBundleUsesOtherImagesAsConstantObservations) {
   for (image_t id = 7; id <= 12; ++id) config.AddImage(id);
   const Reconstruction before = reconstruction;
 
-  BundleAdjuster adjuster(BundleAdjustmentOptions::Local(), config);
+  BundleAdjustmentOptions options = BundleAdjustmentOptions::Local();
+  options.max_constant_observations_per_point = 0;
+  BundleAdjuster adjuster(options, config);
   ASSERT_TRUE(adjuster.Solve(&reconstruction)) << adjuster.FullReport();
   EXPECT_EQ(adjuster.report().num_variable_images, 6);
   // Every observation of the points seen by the newest images is in the problem.
@@ -404,6 +436,37 @@ TEST(BundleAdjustment, LocalBundleUsesOtherImagesAsConstantObservations) {
               before.GetImage(id).cam_from_world.translation);
   }
   // The old images fix the gauge, so the new poses return to the truth.
+  for (image_t id = 7; id <= 12; ++id) {
+    const Image& a = truth.GetImage(id);
+    const Image& b = reconstruction.GetImage(id);
+    EXPECT_LT(RotationAngleDegrees(a.cam_from_world.rotation * b.cam_from_world.rotation.inverse()),
+              1e-6);
+    EXPECT_LT((a.ProjectionCenter() - b.ProjectionCenter()).norm(), 1e-7);
+  }
+}
+
+// With a cap on the anchoring observations, each point keeps at most that many of its
+// observations by the old images, and the new images still return to the truth.
+TEST(BundleAdjustment, LocalBundleCapsTheAnchoringObservationsOfEachPoint) {
+  const Reconstruction truth = MakeArcScene(CameraModelId::kPinhole, 12, 300, 13);
+  Reconstruction reconstruction = truth;
+  Perturb(&reconstruction, {1, 2, 3, 4, 5, 6}, 0.8, 0.03, 0.03, 14);
+  BundleAdjustmentConfig config;
+  for (image_t id = 7; id <= 12; ++id) config.AddImage(id);
+  BundleAdjustmentOptions options = BundleAdjustmentOptions::Local();
+  options.max_constant_observations_per_point = 2;
+  BundleAdjuster adjuster(options, config);
+  ASSERT_TRUE(adjuster.Solve(&reconstruction)) << adjuster.FullReport();
+  size_t expected_blocks = 0, uncapped = 0;
+  for (const auto& [id, point] : truth.Points3D()) {
+    size_t inside = 0, outside = 0;
+    for (const TrackElement& element : point.track.elements) (element.image_id >= 7 ? inside : outside)++;
+    if (inside == 0) continue;
+    expected_blocks += inside + std::min<size_t>(outside, 2);
+    uncapped += inside + outside;
+  }
+  EXPECT_EQ(adjuster.report().num_reprojection_residual_blocks, static_cast<int>(expected_blocks));
+  EXPECT_LT(expected_blocks, uncapped);
   for (image_t id = 7; id <= 12; ++id) {
     const Image& a = truth.GetImage(id);
     const Image& b = reconstruction.GetImage(id);

@@ -275,6 +275,38 @@ Rigid3d PoseFromHomography(const Eigen::Matrix3d& H_normalized,
   return best;
 }
 
+// The relative pose of a pair whose config is kUncalibrated (E = K2^T F K1, polished on the
+// inliers, as COLMAP) or planar-or-panoramic (the decomposition of H; kPlanar or kPanoramic by
+// the median ray angle), under the intrinsics K1, K2; inliers are normalised coordinates.
+// Sets geometry->cam2_from_cam1, the config of planar-or-panoramic pairs, and E when
+// set_essential (from the pose for uncalibrated pairs, K2^T F K1 for planar ones).
+PoseSupport SetPoseFromUncalibrated(const Eigen::Matrix3d& K1, const Eigen::Matrix3d& K2,
+                                    const std::vector<Eigen::Vector2d>& inliers1,
+                                    const std::vector<Eigen::Vector2d>& inliers2,
+                                    double threshold_normalized, double min_planar_tri_angle_deg,
+                                    bool set_essential, TwoViewGeometry* geometry) {
+  Rigid3d pose;
+  if (geometry->config == TwoViewGeometry::kUncalibrated) {
+    std::vector<char> mask(inliers1.size(), 1);
+    pose = PolishPose(K2.transpose() * geometry->F * K1, inliers1, inliers2, threshold_normalized,
+                      /*reselect=*/false, &mask);
+    if (set_essential) geometry->E = EssentialFromPose(pose);
+  } else {
+    if (set_essential) geometry->E = K2.transpose() * geometry->F * K1;
+    pose = PoseFromHomography(K2.inverse() * geometry->H * K1, inliers1, inliers2);
+  }
+  const PoseSupport support = EvaluatePose(pose, inliers1, inliers2);
+  if (geometry->config != TwoViewGeometry::kUncalibrated) {
+    const bool panoramic =
+        pose.translation.norm() < 1e-12 || support.median_angle_deg < min_planar_tri_angle_deg;
+    geometry->config = panoramic ? TwoViewGeometry::kPanoramic : TwoViewGeometry::kPlanar;
+    pose.translation =
+        panoramic ? Eigen::Vector3d::Zero() : Eigen::Vector3d(pose.translation.normalized());
+  }
+  geometry->cam2_from_cam1 = pose;
+  return support;
+}
+
 }  // namespace
 
 void TwoViewVerificationOptions::Check() const {
@@ -417,40 +449,51 @@ TwoViewVerification VerifyTwoViewGeometry(const Camera& camera1,
   geometry.config = config;
   geometry.F = F.model;
   geometry.H = H.model;
-  std::vector<char> inlier_mask = best->inliers;
-  Rigid3d pose;
+  const std::vector<char>& inlier_mask = best->inliers;
+  PoseSupport support;
   if (config == TwoViewGeometry::kCalibrated) {
     geometry.E = E.model;
-    pose = calibrated_pose;
-  } else if (config == TwoViewGeometry::kUncalibrated) {
-    // As COLMAP: E from F and the (guessed) intrinsics; polished on F's inliers, which stay.
-    std::vector<char> mask = inlier_mask;
-    pose = PolishPose(K2.transpose() * F.model * K1, normalized1, normalized2,
-                      threshold_normalized, /*reselect=*/false, &mask);
-    geometry.E = EssentialFromPose(pose);
+    geometry.cam2_from_cam1 = calibrated_pose;
+    support = EvaluatePose(calibrated_pose, Select(normalized1, inlier_mask),
+                           Select(normalized2, inlier_mask));
   } else {
-    geometry.E = calibrated && E.num_inliers > 0 ? E.model
-                                                 : Eigen::Matrix3d(K2.transpose() * F.model * K1);
-    pose = PoseFromHomography(K2.inverse() * H.model * K1, Select(normalized1, inlier_mask),
-                              Select(normalized2, inlier_mask));
+    const bool calibrated_planar = calibrated && E.num_inliers > 0 &&
+                                   config == TwoViewGeometry::kPlanarOrPanoramic;
+    if (calibrated_planar) geometry.E = E.model;
+    support = SetPoseFromUncalibrated(K1, K2, Select(normalized1, inlier_mask),
+                                      Select(normalized2, inlier_mask), threshold_normalized,
+                                      options.min_planar_tri_angle_deg,
+                                      /*set_essential=*/!calibrated_planar, &geometry);
   }
-
-  const PoseSupport support =
-      EvaluatePose(pose, Select(normalized1, inlier_mask), Select(normalized2, inlier_mask));
   result.median_tri_angle_deg = support.median_angle_deg;
   result.num_pose_inliers = support.num_in_front;
-  if (config == TwoViewGeometry::kPlanarOrPanoramic) {
-    const bool panoramic = pose.translation.norm() < 1e-12 ||
-                           support.median_angle_deg < options.min_planar_tri_angle_deg;
-    geometry.config = panoramic ? TwoViewGeometry::kPanoramic : TwoViewGeometry::kPlanar;
-    pose.translation =
-        panoramic ? Eigen::Vector3d::Zero() : Eigen::Vector3d(pose.translation.normalized());
-  }
-  geometry.cam2_from_cam1 = pose;
   for (size_t i = 0; i < n; ++i) {
     if (inlier_mask[i]) geometry.inlier_matches.push_back(matches[i]);
   }
   return result;
+}
+
+void UpdateRelativePose(const Camera& camera1, const std::vector<Eigen::Vector2d>& keypoints1,
+                        const Camera& camera2, const std::vector<Eigen::Vector2d>& keypoints2,
+                        const TwoViewVerificationOptions& options, TwoViewGeometry* geometry) {
+  const int config = geometry->config;
+  if (config != TwoViewGeometry::kUncalibrated && config != TwoViewGeometry::kPlanar &&
+      config != TwoViewGeometry::kPanoramic && config != TwoViewGeometry::kPlanarOrPanoramic) {
+    return;
+  }
+  std::vector<Eigen::Vector2d> inliers1, inliers2;
+  inliers1.reserve(geometry->inlier_matches.size());
+  inliers2.reserve(geometry->inlier_matches.size());
+  for (const FeatureMatch& m : geometry->inlier_matches) {
+    inliers1.push_back(camera1.CamFromImg(keypoints1.at(m.point2D_idx1)));
+    inliers2.push_back(camera2.CamFromImg(keypoints2.at(m.point2D_idx2)));
+  }
+  if (config != TwoViewGeometry::kUncalibrated) geometry->config = TwoViewGeometry::kPlanarOrPanoramic;
+  const double threshold_normalized =
+      options.max_error / (0.5 * (camera1.MeanFocalLength() + camera2.MeanFocalLength()));
+  SetPoseFromUncalibrated(CalibrationMatrix(camera1), CalibrationMatrix(camera2), inliers1,
+                          inliers2, threshold_normalized, options.min_planar_tri_angle_deg,
+                          /*set_essential=*/true, geometry);
 }
 
 }  // namespace loopsfm

@@ -93,4 +93,13 @@ TwoViewVerification VerifyTwoViewGeometry(const Camera& camera1,
                                           const TwoViewVerificationOptions& options,
                                           Random& random);
 
+// Re-estimates E and the relative pose of a verified uncalibrated, planar or panoramic pair
+// from its F or H and its inlier matches under new intrinsics (after self-calibration has
+// replaced a guessed focal length), as VerifyTwoViewGeometry would have with them; a planar
+// pair may become panoramic and back. keypoints1/2: the two images' keypoint positions
+// (pixels), indexed by the inlier matches. Other pairs are left unchanged.
+void UpdateRelativePose(const Camera& camera1, const std::vector<Eigen::Vector2d>& keypoints1,
+                        const Camera& camera2, const std::vector<Eigen::Vector2d>& keypoints2,
+                        const TwoViewVerificationOptions& options, TwoViewGeometry* geometry);
+
 }  // namespace loopsfm

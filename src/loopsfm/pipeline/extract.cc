@@ -28,8 +28,9 @@ namespace {
 // database so a resumed run keeps its ids.
 class CameraRegistry {
  public:
-  CameraRegistry(Database& database, const std::optional<Camera>& intrinsics)
-      : database_(database), intrinsics_(intrinsics) {
+  CameraRegistry(Database& database, const std::optional<Camera>& intrinsics,
+                 CameraModelId guess_model)
+      : database_(database), intrinsics_(intrinsics), guess_model_(guess_model) {
     for (const Camera& camera : database_.ReadCameras()) stored_.push_back(camera);
   }
 
@@ -46,7 +47,7 @@ class CameraRegistry {
       }
       camera = *intrinsics_;
     } else {
-      camera = Camera::GuessFromImageSize(width, height);
+      camera = Camera::GuessFromImageSize(width, height, guess_model_);
     }
     camera_t id = kInvalidCameraId;
     for (const Camera& stored : stored_) {
@@ -71,6 +72,7 @@ class CameraRegistry {
  private:
   Database& database_;
   std::optional<Camera> intrinsics_;
+  CameraModelId guess_model_;
   std::vector<Camera> stored_;
   std::map<std::pair<int, int>, camera_t> by_size_;
 };
@@ -89,7 +91,7 @@ ExtractReport ExtractFeatures(const std::filesystem::path& input, Database& data
   Timer timer;
   std::unique_ptr<FrameSource> source = OpenFrameSource(input);
   KeyframeSelector selector(*source, options.keyframes);
-  CameraRegistry cameras(database, options.intrinsics);
+  CameraRegistry cameras(database, options.intrinsics, options.camera_model);
 
   const int threads = options.num_threads > 0 ? options.num_threads
                                               : std::max(1, cv::getNumberOfCPUs());

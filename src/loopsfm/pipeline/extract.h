@@ -20,8 +20,10 @@ struct ExtractOptions {
   KeyframeOptions keyframes;
   // Detector and descriptor settings.
   SiftOptions sift;
-  // Known intrinsics (from --intrinsics); without them a camera is guessed per image size.
+  // Known intrinsics (from --intrinsics); without them a camera of camera_model is guessed
+  // per image size (self-calibration estimates its focal length before mapping).
   std::optional<Camera> intrinsics;
+  CameraModelId camera_model = CameraModelId::kSimpleRadial;
   // Worker threads for feature extraction (0: all cores).
   int num_threads = 0;
   // Show progress on stderr.

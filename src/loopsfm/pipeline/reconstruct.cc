@@ -18,6 +18,7 @@ namespace fs = std::filesystem;
 void ReconstructOptions::Check() const {
   extract.Check();
   match.Check();
+  self_calibration.Check();
   mapper.Check();
 }
 
@@ -97,6 +98,9 @@ std::vector<ModelSummary> ExportModels(const std::vector<Reconstruction>& models
     if (write_text) WriteColmapModelText(summary.path, models[m]);
     summary.num_registered = models[m].NumRegImages();
     summary.num_points = models[m].NumPoints3D();
+    for (const auto& [id, camera] : models[m].Cameras()) summary.cameras.push_back(camera);
+    std::sort(summary.cameras.begin(), summary.cameras.end(),
+              [](const Camera& a, const Camera& b) { return a.camera_id < b.camera_id; });
     summary.mean_track_length = models[m].ComputeMeanTrackLength();
     Reconstruction copy = models[m];
     summary.mean_reprojection_error = copy.UpdateReprojectionErrors();
@@ -139,11 +143,19 @@ ReconstructReport Reconstruct(const fs::path& input, const fs::path& output_dir,
                report.match.num_pairs_verified, report.match.MeanInliers());
 
   stage.Restart();
-  const MapperInput mapper_input = LoadMapperInput(database, &report.tracks);
+  MapperInput mapper_input = LoadMapperInput(database, &report.tracks);
   report.stage_times.push_back({"tracks", stage.ElapsedSeconds()});
   spdlog::info("tracks: {} (mean length {:.2f}; {} conflicting split, {} matches left out)",
                report.tracks.num_tracks, report.tracks.mean_track_length,
                report.tracks.num_conflicting_tracks, report.tracks.num_dropped_matches);
+
+  if (options.self_calibrate) {
+    stage.Restart();
+    SelfCalibrationOptions self_calibration = options.self_calibration;
+    self_calibration.verification = options.match.verification;
+    report.self_calibration = SelfCalibrate(self_calibration, &mapper_input);
+    report.stage_times.push_back({"self-calibration", stage.ElapsedSeconds()});
+  }
 
   stage.Restart();
   std::vector<Reconstruction> models;

@@ -17,12 +17,16 @@
 #include "loopsfm/pipeline/extract.h"
 #include "loopsfm/pipeline/match.h"
 #include "loopsfm/sfm/incremental_mapper.h"
+#include "loopsfm/sfm/self_calibration.h"
 
 namespace loopsfm {
 
 struct ReconstructOptions {
   ExtractOptions extract;
   MatchOptions match;
+  // Estimate the focal length of cameras without --intrinsics before mapping.
+  bool self_calibrate = true;
+  SelfCalibrationOptions self_calibration;
   IncrementalMapperOptions mapper;
   // Also write the COLMAP model as text files.
   bool write_text = false;
@@ -42,6 +46,8 @@ struct ModelSummary {
   size_t num_points = 0;
   double mean_track_length = 0.0;
   double mean_reprojection_error = 0.0;
+  // The model's cameras, as refined.
+  std::vector<Camera> cameras;
 };
 
 struct ReconstructReport {
@@ -49,6 +55,7 @@ struct ReconstructReport {
   ExtractReport extract;
   MatchReport match;
   TrackBuildReport tracks;
+  SelfCalibrationReport self_calibration;
   MapperReport mapper;
   std::vector<ModelSummary> models;
   std::vector<StageTime> stage_times;

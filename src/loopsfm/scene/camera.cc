@@ -6,15 +6,27 @@
 
 namespace loopsfm {
 
-Camera Camera::GuessFromImageSize(int width, int height) {
+Camera Camera::GuessFromImageSize(int width, int height, CameraModelId model_id) {
   Camera camera;
-  camera.model_id = CameraModelId::kPinhole;
+  camera.model_id = model_id;
   camera.width = width;
   camera.height = height;
-  const double focal = 1.2 * std::max(width, height);
-  camera.params = {focal, focal, width / 2.0, height / 2.0};
+  VisitCameraModel(model_id, [&](auto model) {
+    using Model = decltype(model);
+    camera.params.assign(Model::kNumParams, 0.0);
+    camera.params[Model::kNumFocal] = width / 2.0;
+    camera.params[Model::kNumFocal + 1] = height / 2.0;
+  });
+  camera.SetFocalLength(1.2 * std::max(width, height));
   camera.has_prior_focal_length = false;
   return camera;
+}
+
+void Camera::SetFocalLength(double focal_px) {
+  VisitCameraModel(model_id, [&](auto model) {
+    using Model = decltype(model);
+    for (int i = 0; i < Model::kNumFocal; ++i) params.at(i) = focal_px;
+  });
 }
 
 double Camera::MeanFocalLength() const {

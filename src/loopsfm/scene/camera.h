@@ -21,9 +21,13 @@ struct Camera {
   // True when the focal length came from the user or calibration, not from a guess.
   bool has_prior_focal_length = false;
 
-  // PINHOLE camera with the focal length guessed as 1.2 * max(width, height) (as COLMAP
-  // does for images without EXIF) and the principal point at the image centre.
-  static Camera GuessFromImageSize(int width, int height);
+  // A camera of the given model for unknown intrinsics: focal length(s) 1.2 * max(width,
+  // height) (COLMAP's guess for images without EXIF; self-calibration replaces it before
+  // mapping), the principal point at the image centre, no distortion.
+  static Camera GuessFromImageSize(int width, int height,
+                                   CameraModelId model_id = CameraModelId::kSimpleRadial);
+  // Sets every focal length parameter (one, or fx and fy) to focal_px.
+  void SetFocalLength(double focal_px);
 
   std::string ModelName() const { return std::string(CameraModelName(model_id)); }
   double MeanFocalLength() const;

@@ -14,7 +14,47 @@
 
 namespace loopsfm {
 
+IntrinsicsRefinement IntrinsicsRefinement::Parse(const std::string& text) {
+  IntrinsicsRefinement refine;
+  if (text == "none") return refine;
+  std::string::size_type begin = 0;
+  while (begin <= text.size()) {
+    const std::string::size_type end = std::min(text.find(',', begin), text.size());
+    const std::string word = text.substr(begin, end - begin);
+    if (word == "focal") {
+      refine.focal_length = true;
+    } else if (word == "principal-point") {
+      refine.principal_point = true;
+    } else if (word == "distortion") {
+      refine.distortion = true;
+    } else {
+      throw InvalidArgument(fmt::format(
+          "cannot refine '{}' (in '{}'); list any of focal, principal-point, distortion, "
+          "separated by commas, or give none", word, text));
+    }
+    begin = end + 1;
+  }
+  return refine;
+}
+
+std::string IntrinsicsRefinement::ToString() const {
+  std::string text;
+  auto add = [&](bool on, const char* word) {
+    if (!on) return;
+    if (!text.empty()) text += ',';
+    text += word;
+  };
+  add(focal_length, "focal");
+  add(principal_point, "principal-point");
+  add(distortion, "distortion");
+  return text.empty() ? "none" : text;
+}
+
 void IncrementalMapperOptions::Check() const {
+  LOOPSFM_REQUIRE_OPTION(!refine_known.Any() || !refine_unknown.Any() ||
+                             refine_known.ToString() == refine_unknown.ToString(),
+                         "known and unknown intrinsics must be refined alike, or one not at all "
+                         "(got {} and {})", refine_known.ToString(), refine_unknown.ToString());
   LOOPSFM_REQUIRE_OPTION(init_min_num_inliers >= 16, "initial pair needs at least 16 inliers, got {}",
                          init_min_num_inliers);
   LOOPSFM_REQUIRE_OPTION(init_max_h_inlier_ratio > 0 && init_max_h_inlier_ratio <= 1,

@@ -17,6 +17,7 @@
 //   (model_merger.h). A grown model too small to keep is discarded and its frames stay
 //   free for later models. Only what has no link stays a separate model.
 
+#include <string>
 #include <vector>
 
 #include "loopsfm/math/random.h"
@@ -24,6 +25,19 @@
 #include "loopsfm/sfm/mapper_input.h"
 
 namespace loopsfm {
+
+// Which intrinsic parameters of a camera bundle adjustment refines. The focal lengths of a
+// model with fx and fy are refined as they are (COLMAP's convention).
+struct IntrinsicsRefinement {
+  bool focal_length = false;
+  bool principal_point = false;
+  bool distortion = false;
+  bool Any() const { return focal_length || principal_point || distortion; }
+  // "focal,principal-point,distortion" (any subset, comma-separated) or "none"; throws
+  // InvalidArgument naming the accepted words otherwise.
+  static IntrinsicsRefinement Parse(const std::string& text);
+  std::string ToString() const;
+};
 
 struct IncrementalMapperOptions {
   // Initial pair: fewest inlier matches (pairs with half as many are tried when no pair
@@ -54,10 +68,12 @@ struct IncrementalMapperOptions {
   int local_ba_num_images = 6;
   // Global bundle adjustment when the registered frame count has grown by this fraction.
   double global_ba_growth = 0.25;
-  // Refine focal lengths of cameras whose intrinsics were guessed (no prior focal length).
-  bool refine_guessed_focal_length = true;
-  // Refine distortion parameters too (cameras whose model has any).
-  bool refine_extra_params = false;
+  // What global bundle adjustments refine of cameras without a prior focal length (guessed
+  // or self-calibrated), and of cameras with known intrinsics (--intrinsics). Local bundles
+  // hold every camera fixed. Focal lengths are refined once a model has 5 frames, the
+  // principal point and distortion once it has 10.
+  IntrinsicsRefinement refine_unknown = {.focal_length = true, .distortion = true};
+  IntrinsicsRefinement refine_known = {};
   // Stop after this many models; models smaller than min_model_size frames are discarded.
   int max_num_models = 10;
   int min_model_size = 3;
@@ -85,6 +101,11 @@ struct MapperReport {
   int num_models_discarded = 0;
   int num_local_ba = 0;
   int num_global_ba = 0;
+  // Summed over all local / global bundles: solver iterations and residual blocks.
+  long long num_local_ba_iterations = 0;
+  long long num_local_ba_residuals = 0;
+  long long num_global_ba_iterations = 0;
+  long long num_global_ba_residuals = 0;
   // Bundle adjustments whose solver failed (the model kept its previous state).
   int num_failed_bundles = 0;
   double seconds_registration = 0.0;

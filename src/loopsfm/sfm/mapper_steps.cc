@@ -92,6 +92,8 @@ bool MapperState::LocalBundle(image_t image_id, MapperReport* report) {
   ba_options.num_threads = options_.num_threads > 0 ? options_.num_threads : -1;
   BundleAdjuster adjuster(ba_options, config);
   const bool ok = ReportSolve(adjuster, &reconstruction_, "local", report);
+  report->num_local_ba_iterations += adjuster.report().num_iterations;
+  report->num_local_ba_residuals += adjuster.report().num_residual_blocks;
   // Points of the local frames may have moved: check them.
   std::vector<point3D_t> touched;
   for (image_t id : config.ImageIds()) {
@@ -114,20 +116,29 @@ bool MapperState::GlobalBundle(MapperReport* report) {
   FixGaugeWithTwoImages(reconstruction_, gauge1_, gauge2_, &config);
   BundleAdjustmentOptions ba_options = BundleAdjustmentOptions::Global();
   ba_options.num_threads = options_.num_threads > 0 ? options_.num_threads : -1;
-  bool any_guessed = false;
+  // A camera's parameters are refined by what its kind of intrinsics asks for, and only
+  // once the model has enough frames to constrain them.
+  const size_t num_frames = reconstruction_.NumRegImages();
   for (const auto& [id, camera] : reconstruction_.Cameras()) {
-    if (camera.has_prior_focal_length || !options_.refine_guessed_focal_length) {
-      if (!options_.refine_extra_params) config.SetConstantCamera(id);
-    } else {
-      any_guessed = true;
+    const IntrinsicsRefinement& asked =
+        camera.has_prior_focal_length ? options_.refine_known : options_.refine_unknown;
+    const bool focal = asked.focal_length && num_frames >= 5;
+    const bool pp = asked.principal_point && num_frames >= 10;
+    const bool distortion = asked.distortion && num_frames >= 10;
+    if (!focal && !pp && !distortion) {
+      config.SetConstantCamera(id);
+      continue;
     }
+    // One set of refine flags serves every variable camera; both kinds of camera in one model
+    // with different requests is not supported (the flags set both alike).
+    ba_options.refine_focal_length |= focal;
+    ba_options.refine_principal_point |= pp;
+    ba_options.refine_extra_params |= distortion;
   }
-  // Focal length is poorly constrained by few frames: refine it once the model has some.
-  ba_options.refine_focal_length = any_guessed && reconstruction_.NumRegImages() >= 5;
-  ba_options.refine_extra_params =
-      options_.refine_extra_params && reconstruction_.NumRegImages() >= 10;
   BundleAdjuster adjuster(ba_options, config);
   const bool ok = ReportSolve(adjuster, &reconstruction_, "global", report);
+  report->num_global_ba_iterations += adjuster.report().num_iterations;
+  report->num_global_ba_residuals += adjuster.report().num_residual_blocks;
   ++report->num_global_ba;
   report->seconds_global_ba += timer.ElapsedSeconds();
   return ok;

@@ -165,15 +165,17 @@ TEST_F(DatabaseTest, CamerasRoundTrip) {
   EXPECT_EQ(db.WriteCamera(updated), id1);
   EXPECT_EQ(db.NumCameras(), 2u);
   EXPECT_DOUBLE_EQ(db.ReadCameras().at(0).params[0], 1000.0);
-  EXPECT_EQ(db.ReadCameras().at(1).model_id, CameraModelId::kPinhole);
+  EXPECT_EQ(db.ReadCameras().at(1).model_id, CameraModelId::kSimpleRadial);
 
-  // params are a blob of doubles in the model's order.
+  // params are a blob of doubles in the model's order (SIMPLE_RADIAL: f, cx, cy, k).
   const std::string blob = RawBlob(path_, "SELECT params FROM cameras WHERE camera_id = 2");
   ASSERT_EQ(blob.size(), 4 * sizeof(double));
   double params[4];
   std::memcpy(params, blob.data(), blob.size());
   EXPECT_EQ(params[0], 1.2 * 640);
-  EXPECT_EQ(params[2], 320.0);
+  EXPECT_EQ(params[1], 320.0);
+  EXPECT_EQ(params[2], 240.0);
+  EXPECT_EQ(params[3], 0.0);
 }
 
 TEST_F(DatabaseTest, EveryCameraModelRoundTrips) {

@@ -1,0 +1,100 @@
+#include "loopsfm/sfm/self_calibration.h"
+
+#include <algorithm>
+#include <unordered_map>
+
+#include "loopsfm/util/errors.h"
+#include "loopsfm/util/logging.h"
+#include "loopsfm/util/timer.h"
+
+namespace loopsfm {
+
+void SelfCalibrationOptions::Check() const {
+  focal.Check();
+  verification.Check();
+  LOOPSFM_REQUIRE_OPTION(max_num_pairs > 0, "self-calibration max_num_pairs must be positive, got {}",
+                         max_num_pairs);
+}
+
+SelfCalibrationReport SelfCalibrate(const SelfCalibrationOptions& options, MapperInput* input) {
+  options.Check();
+  Timer timer;
+  SelfCalibrationReport report;
+  std::unordered_map<image_t, const MapperFrame*> frame_of;
+  for (const MapperFrame& frame : input->frames) frame_of[frame.image_id] = &frame;
+  auto camera_of = [&](image_t id) {
+    const auto it = frame_of.find(id);
+    LOOPSFM_CHECK_MSG(it != frame_of.end(), "pair refers to frame {} without keypoints", id);
+    return it->second->camera_id;
+  };
+
+  std::unordered_map<camera_t, Camera*> calibrated;
+  for (Camera& camera : input->cameras) {
+    if (camera.has_prior_focal_length) continue;
+    CameraSelfCalibration entry;
+    entry.camera_id = camera.camera_id;
+    entry.initial_focal_px = entry.focal_px = camera.MeanFocalLength();
+
+    // The camera's uncalibrated pairs, most inliers first.
+    std::vector<const MapperPair*> pairs;
+    for (const MapperPair& pair : input->pairs) {
+      if (pair.geometry.config == TwoViewGeometry::kUncalibrated &&
+          camera_of(pair.pair.image_id1) == camera.camera_id &&
+          camera_of(pair.pair.image_id2) == camera.camera_id) {
+        pairs.push_back(&pair);
+      }
+    }
+    std::stable_sort(pairs.begin(), pairs.end(), [](const MapperPair* a, const MapperPair* b) {
+      return a->geometry.inlier_matches.size() > b->geometry.inlier_matches.size();
+    });
+    if (pairs.size() > static_cast<size_t>(options.max_num_pairs)) pairs.resize(options.max_num_pairs);
+    std::vector<Eigen::Matrix3d> fundamentals;
+    std::vector<double> weights;
+    for (const MapperPair* pair : pairs) {
+      fundamentals.push_back(pair->geometry.F);
+      weights.push_back(static_cast<double>(pair->geometry.inlier_matches.size()));
+    }
+    const Eigen::Vector2d principal_point(camera.width / 2.0, camera.height / 2.0);
+    entry.estimate = EstimateSharedFocalLength(fundamentals, weights, principal_point,
+                                               camera.width, camera.height, options.focal);
+    if (entry.estimate.success) {
+      // The estimate assumes the principal point at the centre: put it there.
+      Camera guess = Camera::GuessFromImageSize(camera.width, camera.height, camera.model_id);
+      for (size_t i = 0; i < camera.params.size(); ++i) {
+        if (i < guess.params.size()) camera.params[i] = guess.params[i];
+      }
+      camera.SetFocalLength(entry.estimate.focal_px);
+      entry.focal_px = entry.estimate.focal_px;
+      entry.applied = true;
+      calibrated[camera.camera_id] = &camera;
+      spdlog::info("self-calibration: camera {} focal length {:.1f} px (guess {:.1f}), spread "
+                   "{:.2f} %, {} of {} pairs agree ({} usable)",
+                   camera.camera_id, entry.focal_px, entry.initial_focal_px,
+                   100.0 * entry.estimate.spread, entry.estimate.num_pairs_inlier,
+                   entry.estimate.num_pairs, entry.estimate.num_pairs_used);
+    } else {
+      spdlog::warn("self-calibration: camera {} keeps its guessed focal length {:.1f} px: {}; "
+                   "bundle adjustment refines it, or pass --intrinsics",
+                   camera.camera_id, entry.initial_focal_px, entry.estimate.explanation);
+    }
+    report.cameras.push_back(std::move(entry));
+  }
+
+  if (!calibrated.empty()) {
+    std::unordered_map<camera_t, const Camera*> cameras;
+    for (const Camera& camera : input->cameras) cameras[camera.camera_id] = &camera;
+    for (MapperPair& pair : input->pairs) {
+      const MapperFrame& frame1 = *frame_of.at(pair.pair.image_id1);
+      const MapperFrame& frame2 = *frame_of.at(pair.pair.image_id2);
+      if (!calibrated.count(frame1.camera_id) && !calibrated.count(frame2.camera_id)) continue;
+      UpdateRelativePose(*cameras.at(frame1.camera_id), frame1.points2D,
+                         *cameras.at(frame2.camera_id), frame2.points2D, options.verification,
+                         &pair.geometry);
+      ++report.num_pairs_updated;
+    }
+  }
+  report.seconds = timer.ElapsedSeconds();
+  return report;
+}
+
+}  // namespace loopsfm
