@@ -68,21 +68,25 @@ GuidedPairingReport RunGuidedPairing(const Eigen::MatrixXf& scores,
                                      const std::vector<image_t>& image_ids,
                                      const GuidedPairingOptions& options,
                                      const VerifyPairsFn& verify, BoolMatrix* tried,
-                                     BoolMatrix* verified) {
+                                     BoolMatrix* verified, const BoolMatrix* sequential) {
   options.Check();
   const int n = static_cast<int>(image_ids.size());
   LOOPSFM_CHECK(scores.rows() == n && scores.cols() == n);
   LOOPSFM_CHECK(tried->rows() == n && verified->rows() == n);
+  LOOPSFM_CHECK(sequential == nullptr || (sequential->rows() == n && sequential->cols() == n));
   GuidedPairingReport report;
   // Score proposals of the next round: k in the first, then as many as the previous round's
   // score proposals verified, until more than max_failure_ratio of a round's fail.
   int num_by_score = options.num_proposals > 0 ? options.num_proposals : n;
 
-  // Partners beyond the sequential window that this pairing verified, per frame. Pairs
-  // verified before (the sequential waves' i + 2^k steps) are temporal neighbours, not links
-  // to the other pass of a loop: counting them would saturate a frame before its loop pair
-  // is ever proposed.
+  // Verified partners beyond the sequential window, per frame.
   std::vector<int> loop_partners(n, 0);
+  for (int i = 0; i < n; ++i) {
+    for (int j = 0; j < n; ++j) {
+      loop_partners[i] += (*verified)(i, j) && std::abs(i - j) > options.min_frame_gap &&
+                          !(sequential != nullptr && (*sequential)(i, j));
+    }
+  }
   // Proposals of the current round count as partners until verified or not, so one round's
   // growth along a wide band does not overshoot the limit.
   std::vector<int> pending(n, 0);

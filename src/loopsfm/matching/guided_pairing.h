@@ -34,8 +34,8 @@ struct GuidedPairingOptions {
   // Score proposals skip pairs at most this many frames apart: the sequential part covers
   // them, and their failures would stop the search for loops (0: none skipped).
   int min_frame_gap = 0;
-  // A frame with this many partners beyond min_frame_gap verified by this pairing (pairs
-  // verified before it do not count) is linked to the other passes well enough: a proposal whose two frames both have as many is skipped, so a wide
+  // A frame with this many verified partners beyond min_frame_gap is linked to the other
+  // passes well enough: a proposal whose two frames both have as many is skipped, so a wide
   // loop band is thinned to a few pairs per frame instead of matched whole (0: no limit,
   // every pair region growing reaches is tried, for recall against exhaustive matching).
   int max_loop_partners = 5;
@@ -68,12 +68,17 @@ using VerifyPairsFn = std::function<std::vector<bool>(const std::vector<ImagePai
 // are in capture order so that neighbouring indices are neighbouring frames). `tried`
 // marks pairs matched before (e.g. sequential neighbours), which are never proposed again:
 // n x n, symmetric; `verified` likewise marks which of them verified. Both are updated with
-// this run's pairs.
-GuidedPairingReport RunGuidedPairing(const Eigen::MatrixXf& scores,
-                                     const std::vector<image_t>& image_ids,
-                                     const GuidedPairingOptions& options,
-                                     const VerifyPairsFn& verify,
-                                     Eigen::Matrix<bool, Eigen::Dynamic, Eigen::Dynamic>* tried,
-                                     Eigen::Matrix<bool, Eigen::Dynamic, Eigen::Dynamic>* verified);
+// this run's pairs. Verified pairs count as loop partners when they are more than
+// min_frame_gap apart and not marked in `sequential` (optional, n x n: the pairs the
+// sequential part covered, e.g. its i + 2^k steps and wider first windows, which are
+// temporal neighbours, not links to another pass). Pairs verified by an earlier run count,
+// so a resumed run does not match the loop bands again (it may try one more round of score
+// proposals for frames below the limit).
+GuidedPairingReport RunGuidedPairing(
+    const Eigen::MatrixXf& scores, const std::vector<image_t>& image_ids,
+    const GuidedPairingOptions& options, const VerifyPairsFn& verify,
+    Eigen::Matrix<bool, Eigen::Dynamic, Eigen::Dynamic>* tried,
+    Eigen::Matrix<bool, Eigen::Dynamic, Eigen::Dynamic>* verified,
+    const Eigen::Matrix<bool, Eigen::Dynamic, Eigen::Dynamic>* sequential = nullptr);
 
 }  // namespace loopsfm

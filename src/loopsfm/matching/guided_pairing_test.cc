@@ -153,6 +153,60 @@ TEST(GuidedPairing, LoopPartnerLimitThinsAWideBand) {
   EXPECT_LT(thinned.num_tried, full.num_tried / 2);
 }
 
+// Pairs the sequential part covered do not count as loop partners, and pairs verified by an
+// earlier run do: a frame whose far sequential steps verified still gets its loop pairs, and
+// running again on the finished masks (a resumed run) tries little: one round of score
+// proposals for the frames still below the limit (the stop rule's state is not stored).
+TEST(GuidedPairing, SequentialPairsAreNotLoopPartnersAndResumingTriesNothing) {
+  const int n = 60;
+  std::vector<image_t> ids(n);
+  for (int i = 0; i < n; ++i) ids[i] = static_cast<image_t>(i + 1);
+  // Frames 0-9 see frames 50-59 again; every frame also verifies with i + 8 and i + 16.
+  auto truth = [](int a, int b) {
+    if (a > b) std::swap(a, b);
+    if (b - a <= 3 || b - a == 8 || b - a == 16) return true;
+    return a < 10 && b >= 50 && std::abs(a - (b - 50)) <= 3;
+  };
+  Eigen::MatrixXf scores(n, n);
+  Random random(5);
+  for (int i = 0; i < n; ++i) {
+    for (int j = 0; j < n; ++j) {
+      scores(i, j) = truth(i, j) ? static_cast<float>(random.UniformReal(0.5, 1.0))
+                                 : static_cast<float>(random.UniformReal(0.0, 0.3));
+    }
+  }
+  scores = (scores + scores.transpose()).eval() / 2;
+  BoolMatrix tried = BoolMatrix::Constant(n, n, false), verified = tried, sequential = tried;
+  for (int i = 0; i < n; ++i) {
+    for (int d : {1, 2, 3, 8, 16}) {
+      if (i + d >= n) continue;
+      tried(i, i + d) = tried(i + d, i) = sequential(i, i + d) = sequential(i + d, i) = true;
+      verified(i, i + d) = verified(i + d, i) = truth(i, i + d);
+    }
+  }
+  auto verify = [&](const std::vector<ImagePair>& pairs) {
+    std::vector<bool> ok;
+    for (const ImagePair& p : pairs) ok.push_back(truth(p.image_id1 - 1, p.image_id2 - 1));
+    return ok;
+  };
+  GuidedPairingOptions options;
+  options.num_proposals = 20;
+  options.min_frame_gap = 3;
+  options.max_loop_partners = 2;
+  // Counting the i + 8 and i + 16 pairs, every frame would start saturated.
+  BoolMatrix tried_counting = tried, verified_counting = verified;
+  EXPECT_EQ(RunGuidedPairing(scores, ids, options, verify, &tried_counting, &verified_counting).num_verified, 0u);
+  const GuidedPairingReport first = RunGuidedPairing(scores, ids, options, verify, &tried, &verified, &sequential);
+  EXPECT_GT(first.num_verified, 10u);
+  for (int a = 0; a < 10; ++a) {
+    int partners = 0;
+    for (int b = 50; b < n; ++b) partners += verified(a, b);
+    EXPECT_GE(partners, 1) << a;
+  }
+  const GuidedPairingReport resumed = RunGuidedPairing(scores, ids, options, verify, &tried, &verified, &sequential);
+  EXPECT_LE(resumed.num_tried, static_cast<size_t>(options.num_proposals)) << first.num_tried;
+}
+
 TEST(GuidedPairing, RejectsBadOptions) {
   GuidedPairingOptions options;
   options.max_failure_ratio = 0;

@@ -36,11 +36,13 @@ SequentialWavesReport RunSequentialWaves(
     const std::vector<image_t>& ordered_ids, const SequentialPairingOptions& window,
     const SequentialWavesOptions& options,
     const VerifyPairsFn& verify, Eigen::Matrix<bool, Eigen::Dynamic, Eigen::Dynamic>* tried,
-    Eigen::Matrix<bool, Eigen::Dynamic, Eigen::Dynamic>* verified) {
+    Eigen::Matrix<bool, Eigen::Dynamic, Eigen::Dynamic>* verified,
+    Eigen::Matrix<bool, Eigen::Dynamic, Eigen::Dynamic>* covered) {
   window.Check();
   options.Check();
   const int n = static_cast<int>(ordered_ids.size());
   LOOPSFM_CHECK(tried->rows() == n && tried->cols() == n && verified->rows() == n);
+  if (covered != nullptr) *covered = Eigen::Matrix<bool, Eigen::Dynamic, Eigen::Dynamic>::Constant(n, n, false);
   auto window_of = [&](int i) {
     return i < window.num_initial_frames ? window.initial_overlap : window.overlap;
   };
@@ -90,6 +92,7 @@ SequentialWavesReport RunSequentialWaves(
     }
     for (size_t k = 0; k < from.size(); ++k) {
       const int i = from[k];
+      if (covered != nullptr) (*covered)(i, i + d) = (*covered)(i + d, i) = true;
       FrameState& s = state[i];
       const bool ok = (*verified)(i, i + d);
       if (quadratic[k]) {

@@ -42,7 +42,8 @@ struct SequentialWavesReport {
 
 // `tried` and `verified` are n x n symmetric masks over `ordered_ids` (capture order); pairs
 // already tried are not proposed again (their verified flag stands for the result) and both
-// masks are updated with this run's pairs.
+// masks are updated with this run's pairs. `covered` (optional, n x n) is set for every pair
+// the waves reached, tried now or before: the same set when a run is resumed.
 // `window` gives the window sizes (overlap, and initial_overlap for the first
 // num_initial_frames frames); its quadratic_overlap flag is not used (the waves have their own).
 SequentialWavesReport RunSequentialWaves(const std::vector<image_t>& ordered_ids,
@@ -50,6 +51,7 @@ SequentialWavesReport RunSequentialWaves(const std::vector<image_t>& ordered_ids
                                          const SequentialWavesOptions& options,
                                          const VerifyPairsFn& verify,
                                          Eigen::Matrix<bool, Eigen::Dynamic, Eigen::Dynamic>* tried,
-                                         Eigen::Matrix<bool, Eigen::Dynamic, Eigen::Dynamic>* verified);
+                                         Eigen::Matrix<bool, Eigen::Dynamic, Eigen::Dynamic>* verified,
+                                         Eigen::Matrix<bool, Eigen::Dynamic, Eigen::Dynamic>* covered = nullptr);
 
 }  // namespace loopsfm

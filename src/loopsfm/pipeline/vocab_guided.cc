@@ -80,12 +80,13 @@ void MatchVocabTreeGuided(Database& database, const std::vector<image_t>& ordere
   const int n = static_cast<int>(ordered_ids.size());
   std::unordered_map<image_t, int> index_of;
   for (int i = 0; i < n; ++i) index_of[ordered_ids[i]] = i;
-  BoolMatrix tried = BoolMatrix::Constant(n, n, false), verified = tried;
+  BoolMatrix tried = BoolMatrix::Constant(n, n, false), verified = tried, sequential = tried;
   Timer timer;
   if (options.vocab_include_sequential) {
     auto verify = [&](const std::vector<ImagePair>& pairs) { return matcher.Match(pairs, report); };
     report->vocab.sequential =
-        RunSequentialWaves(ordered_ids, options.sequential, options.sequential_waves, verify, &tried, &verified);
+        RunSequentialWaves(ordered_ids, options.sequential, options.sequential_waves, verify, &tried,
+                           &verified, &sequential);
     const auto& seq = report->vocab.sequential;
     spdlog::info("vocabtree: sequential waves {} pairs ({} verified), of which quadratic steps {} ({} verified)",
                  seq.num_tried, seq.num_verified, seq.num_quadratic_tried, seq.num_quadratic_verified);
@@ -144,9 +145,11 @@ void MatchVocabTreeGuided(Database& database, const std::vector<image_t>& ordere
     return ok;
   };
   GuidedPairingOptions guided = options.guided;
-  // Score proposals leave the sequential window to the sequential part.
+  // Score proposals leave the sequential window to the sequential part; pairs the waves
+  // covered do not count as loop partners.
   if (options.vocab_include_sequential) guided.min_frame_gap = std::max(guided.min_frame_gap, options.sequential.overlap);
-  report->vocab.guided = RunGuidedPairing(scores, ordered_ids, guided, verify, &tried, &verified);
+  report->vocab.guided =
+      RunGuidedPairing(scores, ordered_ids, guided, verify, &tried, &verified, &sequential);
   report->vocab.match_seconds += match_seconds;
   report->vocab.propose_seconds = rounds_timer.ElapsedSeconds() - match_seconds;
   for (size_t r = 0; r < report->vocab.guided.rounds.size(); ++r) {
