@@ -31,6 +31,9 @@ class VideoSource : public FrameSource {
           "or the file is damaged; convert it with ffmpeg or pass a folder of images",
           path.string()));
     }
+    // Phones store portrait video as landscape frames plus a rotation flag: frames are
+    // turned upright, so the camera's width and height are the displayed ones.
+    capture_.set(cv::CAP_PROP_ORIENTATION_AUTO, 1.0);
     info_.kind = SourceKind::kVideo;
     info_.path = path;
     info_.expected_frames = static_cast<int>(capture_.get(cv::CAP_PROP_FRAME_COUNT));

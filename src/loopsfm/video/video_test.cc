@@ -1,5 +1,6 @@
 #include <gtest/gtest.h>
 
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 
@@ -57,6 +58,42 @@ TEST(FrameSource, VideoFramesAreNamedByIndex) {
   }
   EXPECT_EQ(count, 7);
   EXPECT_EQ(VideoFrameName(12), "frame_000012.png");
+}
+
+// A phone's portrait video: landscape frames with a 90 degree rotation flag. Frames come
+// out upright (portrait), turned as the flag says.
+TEST(FrameSource, RotationFlagTurnsFramesUpright) {
+  if (std::system("ffmpeg -version > /dev/null 2>&1") != 0) GTEST_SKIP() << "ffmpeg not found";
+  const fs::path dir = FreshDir("rotation");
+  const fs::path clip = WriteVideo(dir, 3, false);
+  const fs::path landscape = dir / "landscape.mp4", rotated = dir / "portrait.mp4";
+  // ffmpeg writes the rotation flag when copying a stream, not when encoding one.
+  const std::string command = "ffmpeg -loglevel error -y -i '" + clip.string() +
+                              "' -c:v mpeg4 -q:v 2 '" + landscape.string() +
+                              "' && ffmpeg -loglevel error -y -i '" + landscape.string() +
+                              "' -c copy -metadata:s:v:0 rotate=90 '" + rotated.string() + "'";
+  ASSERT_EQ(std::system(command.c_str()), 0) << command;
+  auto source = OpenFrameSource(rotated);
+  const std::optional<RawFrame> frame = source->Next();
+  ASSERT_TRUE(frame.has_value());
+  EXPECT_EQ(frame->image.cols, 120);
+  EXPECT_EQ(frame->image.rows, 160);
+  // The picture is the original turned by 90 degrees (clockwise, as the flag is read), not
+  // merely resized.
+  // Compared at 1/8 size: the per-pixel noise texture does not survive two lossy codecs.
+  auto coarse = [](const cv::Mat& image) {
+    cv::Mat small;
+    cv::resize(image, small, cv::Size(image.cols / 8, image.rows / 8), 0, 0, cv::INTER_AREA);
+    return small;
+  };
+  cv::Mat clockwise, counter;
+  cv::rotate(TestFrame(0, false), clockwise, cv::ROTATE_90_CLOCKWISE);
+  cv::rotate(TestFrame(0, false), counter, cv::ROTATE_90_COUNTERCLOCKWISE);
+  const cv::Mat decoded = coarse(frame->image);
+  const double error_cw = cv::norm(decoded, coarse(clockwise), cv::NORM_L1);
+  const double error_ccw = cv::norm(decoded, coarse(counter), cv::NORM_L1);
+  EXPECT_LT(std::min(error_cw, error_ccw), 0.5 * std::max(error_cw, error_ccw))
+      << error_cw << " " << error_ccw;
 }
 
 TEST(Keyframes, SharpestFrameOfEachWindowIsKept) {
