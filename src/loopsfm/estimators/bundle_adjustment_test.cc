@@ -8,6 +8,7 @@
 
 #include <gtest/gtest.h>
 
+#include "loopsfm/estimators/cost_functions/focal_prior.h"
 #include "loopsfm/estimators/cost_functions/point_distance.h"
 #include "loopsfm/estimators/cost_functions/relative_pose.h"
 #include "loopsfm/estimators/cost_functions/reprojection_error.h"
@@ -678,6 +679,34 @@ TEST(CostFunctions, DistanceAndRelativePoseJacobiansMatchFiniteDifferences) {
   Eigen::Matrix<double, 6, 1> residuals;
   ASSERT_TRUE(relative->Evaluate(parameters, residuals.data(), nullptr));
   EXPECT_LT(residuals.norm(), 1e-12);
+}
+
+}  // namespace
+}  // namespace loopsfm
+
+namespace loopsfm {
+namespace {
+
+TEST(FocalPriorCost, PenalisesTheLogRatioWithTheRightJacobian) {
+  const FocalPriorCost cost(/*num_params=*/4, /*focal_px=*/800.0, /*sigma_log=*/0.2);
+  double params[4] = {800.0, 320.0, 240.0, -0.1};
+  const double* blocks[1] = {params};
+  double residual = 1.0;
+  double jacobian[4];
+  double* jacobians[1] = {jacobian};
+  ASSERT_TRUE(cost.Evaluate(blocks, &residual, jacobians));
+  EXPECT_NEAR(residual, 0.0, 1e-15);
+  params[0] = 960.0;
+  ASSERT_TRUE(cost.Evaluate(blocks, &residual, jacobians));
+  EXPECT_NEAR(residual, std::log(1.2) / 0.2, 1e-12);
+  // Finite difference of the residual in the focal length; nothing else moves it.
+  double shifted = 0.0;
+  params[0] += 1e-4;
+  ASSERT_TRUE(cost.Evaluate(blocks, &shifted, nullptr));
+  EXPECT_NEAR(jacobian[0], (shifted - residual) / 1e-4, 1e-6);
+  for (int i = 1; i < 4; ++i) EXPECT_EQ(jacobian[i], 0.0);
+  params[0] = -5.0;
+  EXPECT_FALSE(cost.Evaluate(blocks, &residual, nullptr)) << "a non-positive focal length is no step";
 }
 
 }  // namespace

@@ -51,6 +51,8 @@ std::string IntrinsicsRefinement::ToString() const {
 }
 
 void IncrementalMapperOptions::Check() const {
+  LOOPSFM_REQUIRE_OPTION(focal_prior_sigma_log >= 0, "focal prior sigma must not be negative, got {}",
+                         focal_prior_sigma_log);
   LOOPSFM_REQUIRE_OPTION(!refine_known.Any() || !refine_unknown.Any() ||
                              refine_known.ToString() == refine_unknown.ToString(),
                          "known and unknown intrinsics must be refined alike, or one not at all "

@@ -74,6 +74,10 @@ struct IncrementalMapperOptions {
   // principal point and distortion once it has 10.
   IntrinsicsRefinement refine_unknown = {.focal_length = true, .distortion = true};
   IntrinsicsRefinement refine_known = {};
+  // Cameras without a prior focal length: while their focal length is refined, it is held
+  // near the one mapping started from (self-calibrated or guessed) by a prior on log f with
+  // this standard deviation (estimators/cost_functions/focal_prior.h; 0: none).
+  double focal_prior_sigma_log = 0.2;
   // Stop after this many models; models smaller than min_model_size frames are discarded.
   int max_num_models = 10;
   int min_model_size = 3;

@@ -4,6 +4,7 @@
 
 #include "loopsfm/estimators/absolute_pose.h"
 #include "loopsfm/estimators/bundle_adjustment.h"
+#include "loopsfm/estimators/cost_functions/focal_prior.h"
 #include "loopsfm/sfm/mapper_state.h"
 #include "loopsfm/util/logging.h"
 #include "loopsfm/util/timer.h"
@@ -136,6 +137,21 @@ bool MapperState::GlobalBundle(MapperReport* report) {
     ba_options.refine_extra_params |= distortion;
   }
   BundleAdjuster adjuster(ba_options, config);
+  if (ba_options.refine_focal_length && options_.focal_prior_sigma_log > 0) {
+    adjuster.SetUp(&reconstruction_);
+    for (const Camera& start : input_.cameras) {
+      if (start.has_prior_focal_length || config.HasConstantCamera(start.camera_id) ||
+          !reconstruction_.ExistsCamera(start.camera_id)) {
+        continue;
+      }
+      Camera& camera = reconstruction_.GetCamera(start.camera_id);
+      if (!adjuster.problem().HasParameterBlock(camera.params.data())) continue;
+      adjuster.problem().AddResidualBlock(
+          new FocalPriorCost(static_cast<int>(camera.params.size()), start.MeanFocalLength(),
+                             options_.focal_prior_sigma_log),
+          nullptr, camera.params.data());
+    }
+  }
   const bool ok = ReportSolve(adjuster, &reconstruction_, "global", report);
   report->num_global_ba_iterations += adjuster.report().num_iterations;
   report->num_global_ba_residuals += adjuster.report().num_residual_blocks;
