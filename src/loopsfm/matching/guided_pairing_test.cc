@@ -17,6 +17,21 @@ bool TrulyMatches(int i, int j) {
   return a < 10 && b >= 90 && std::abs(a - (b - 90)) <= 2;
 }
 
+// A symmetric similarity matrix: pairs that truly match score in [min_true_score, 1), the
+// others in [0, 0.3).
+template <typename Truth>
+Eigen::MatrixXf ScoresFromTruth(int n, const Truth& truth, double min_true_score, uint64_t seed) {
+  Eigen::MatrixXf scores(n, n);
+  Random random(seed);
+  for (int i = 0; i < n; ++i) {
+    for (int j = 0; j < n; ++j) {
+      scores(i, j) = truth(i, j) ? static_cast<float>(random.UniformReal(min_true_score, 1.0))
+                                 : static_cast<float>(random.UniformReal(0.0, 0.3));
+    }
+  }
+  return (scores + scores.transpose()) / 2;
+}
+
 TEST(GuidedPairing, RegionGrowingCoversTheLoopBlockAndStops) {
   const int n = 100;
   std::vector<image_t> ids(n);
@@ -102,15 +117,7 @@ TEST(GuidedPairing, LoopPartnerLimitThinsAWideBand) {
     if (b - a <= 3) return true;
     return a < 30 && b >= 60 && b < 90 && std::abs(a - (b - 60)) <= 6;
   };
-  Eigen::MatrixXf scores(n, n);
-  Random random(4);
-  for (int i = 0; i < n; ++i) {
-    for (int j = 0; j < n; ++j) {
-      scores(i, j) = truth(i, j) ? static_cast<float>(random.UniformReal(0.4, 1.0))
-                                 : static_cast<float>(random.UniformReal(0.0, 0.3));
-    }
-  }
-  scores = (scores + scores.transpose()).eval() / 2;
+  const Eigen::MatrixXf scores = ScoresFromTruth(n, truth, /*min_true_score=*/0.4, /*seed=*/4);
   auto run = [&](int max_loop_partners, BoolMatrix* verified) {
     BoolMatrix tried = BoolMatrix::Constant(n, n, false);
     *verified = tried;
@@ -167,15 +174,7 @@ TEST(GuidedPairing, SequentialPairsAreNotLoopPartnersAndResumingTriesNothing) {
     if (b - a <= 3 || b - a == 8 || b - a == 16) return true;
     return a < 10 && b >= 50 && std::abs(a - (b - 50)) <= 3;
   };
-  Eigen::MatrixXf scores(n, n);
-  Random random(5);
-  for (int i = 0; i < n; ++i) {
-    for (int j = 0; j < n; ++j) {
-      scores(i, j) = truth(i, j) ? static_cast<float>(random.UniformReal(0.5, 1.0))
-                                 : static_cast<float>(random.UniformReal(0.0, 0.3));
-    }
-  }
-  scores = (scores + scores.transpose()).eval() / 2;
+  const Eigen::MatrixXf scores = ScoresFromTruth(n, truth, /*min_true_score=*/0.5, /*seed=*/5);
   BoolMatrix tried = BoolMatrix::Constant(n, n, false), verified = tried, sequential = tried;
   for (int i = 0; i < n; ++i) {
     for (int d : {1, 2, 3, 8, 16}) {

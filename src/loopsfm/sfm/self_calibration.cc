@@ -59,10 +59,7 @@ SelfCalibrationReport SelfCalibrate(const SelfCalibrationOptions& options, Mappe
                                                camera.width, camera.height, options.focal);
     if (entry.estimate.success) {
       // The estimate assumes the principal point at the centre: put it there.
-      Camera guess = Camera::GuessFromImageSize(camera.width, camera.height, camera.model_id);
-      for (size_t i = 0; i < camera.params.size(); ++i) {
-        if (i < guess.params.size()) camera.params[i] = guess.params[i];
-      }
+      camera.params = Camera::GuessFromImageSize(camera.width, camera.height, camera.model_id).params;
       camera.SetFocalLength(entry.estimate.focal_px);
       entry.focal_px = entry.estimate.focal_px;
       entry.applied = true;
