@@ -45,6 +45,19 @@ void AddEvalCommand(CLI::App& app) {
                          100.0 * metrics.ate_fraction_of_path, metrics.gt_path_length);
       out += fmt::format("rotation error      mean {:.3f} deg, max {:.3f} deg\n",
                          metrics.rotation_error_mean_deg, metrics.rotation_error_max_deg);
+      const LoopGaps& gaps = *metrics.loop_gaps;
+      if (gaps.num_revisits == 0) {
+        out += fmt::format(
+            "loop gap            no revisits (no two frames {}+ apart within {:.3g} of each "
+            "other)\n",
+            gaps.min_frame_gap, gaps.max_distance);
+      } else {
+        out += fmt::format(
+            "loop gap            mean {:.4g}, median {:.4g}, max {:.4g} ({} + {}) over {} "
+            "revisits\n",
+            gaps.mean, gaps.median, gaps.max, gaps.max_first, gaps.max_second,
+            gaps.num_revisits);
+      }
     }
     std::fputs(out.c_str(), stdout);
   });

@@ -77,6 +77,54 @@ RelativePoseErrors ComputeRpe(const std::vector<TrajectoryEntry>& ground_truth,
   return rpe;
 }
 
+LoopGaps ComputeLoopGaps(const std::vector<TrajectoryEntry>& ground_truth,
+                         const std::vector<Rigid3d>& aligned_by_gt_index,
+                         const std::vector<bool>& matched_by_gt_index,
+                         const TrajectoryEvalOptions& options) {
+  const size_t n = ground_truth.size();
+  auto gt_centre = [&](size_t k) -> const Eigen::Vector3d& {
+    return ground_truth[k].world_from_cam.translation;
+  };
+  LoopGaps gaps;
+  gaps.min_frame_gap = options.loop_min_frame_gap > 0
+                           ? options.loop_min_frame_gap
+                           : std::max(10, static_cast<int>(n / 5));
+  std::vector<double> steps;
+  for (size_t k = 1; k < n; ++k) steps.push_back((gt_centre(k) - gt_centre(k - 1)).norm());
+  gaps.max_distance = steps.empty() ? 0.0 : options.loop_max_distance_steps * Median(steps);
+  gaps.mean = gaps.median = gaps.max = kNaN;
+  if (!(gaps.max_distance > 0.0)) return gaps;
+
+  std::vector<double> values;
+  for (size_t i = 0; i < n; ++i) {
+    if (!matched_by_gt_index[i]) continue;
+    size_t best = n;
+    double best_distance = gaps.max_distance;
+    for (size_t j = i + gaps.min_frame_gap; j < n; ++j) {
+      if (!matched_by_gt_index[j]) continue;
+      const double distance = (gt_centre(j) - gt_centre(i)).norm();
+      if (distance <= best_distance) {
+        best_distance = distance;
+        best = j;
+      }
+    }
+    if (best == n) continue;
+    const Eigen::Vector3d estimated_offset =
+        aligned_by_gt_index[best].translation - aligned_by_gt_index[i].translation;
+    const double gap = (estimated_offset - (gt_centre(best) - gt_centre(i))).norm();
+    if (values.empty() || gap > Max(values)) {
+      gaps.max_first = ground_truth[i].name;
+      gaps.max_second = ground_truth[best].name;
+    }
+    values.push_back(gap);
+  }
+  gaps.num_revisits = values.size();
+  gaps.mean = Mean(values);
+  gaps.median = Median(values);
+  gaps.max = Max(values);
+  return gaps;
+}
+
 // null for NaN / infinity, so the JSON stays valid for every reader.
 nlohmann::json Number(double value) {
   return std::isfinite(value) ? nlohmann::json(value) : nlohmann::json(nullptr);
@@ -89,6 +137,11 @@ void TrajectoryEvalOptions::Check() const {
   LOOPSFM_REQUIRE_OPTION(min_matched_frames >= 3,
                          "min_matched_frames must be >= 3 (a similarity needs 3 points), got {}",
                          min_matched_frames);
+  LOOPSFM_REQUIRE_OPTION(loop_min_frame_gap >= 0,
+                         "loop_min_frame_gap must be >= 0 (0: automatic), got {}",
+                         loop_min_frame_gap);
+  LOOPSFM_REQUIRE_OPTION(loop_max_distance_steps > 0.0,
+                         "loop_max_distance_steps must be > 0, got {}", loop_max_distance_steps);
 }
 
 std::string TrajectoryNameKey(const std::string& name) {
@@ -251,6 +304,8 @@ TrajectoryMetrics EvaluateTrajectory(const std::vector<TrajectoryEntry>& estimat
     metrics.rpe =
         ComputeRpe(ground_truth, aligned_by_gt_index, matched_by_gt_index, options.rpe_step);
   }
+  metrics.loop_gaps =
+      ComputeLoopGaps(ground_truth, aligned_by_gt_index, matched_by_gt_index, options);
   return metrics;
 }
 
@@ -296,6 +351,19 @@ nlohmann::json ToJson(const TrajectoryMetrics& m, bool include_frames) {
                    {"rotation_max_deg", Number(m.rpe->rotation_max_deg)}};
   } else {
     json["rpe"] = nullptr;
+  }
+  if (m.loop_gaps) {
+    const LoopGaps& g = *m.loop_gaps;
+    json["loop_gaps"] = {{"min_frame_gap", g.min_frame_gap},
+                         {"max_distance", Number(g.max_distance)},
+                         {"num_revisits", g.num_revisits},
+                         {"mean", Number(g.mean)},
+                         {"median", Number(g.median)},
+                         {"max", Number(g.max)},
+                         {"max_first", g.max_first},
+                         {"max_second", g.max_second}};
+  } else {
+    json["loop_gaps"] = nullptr;
   }
   if (include_frames) {
     json["frames"] = nlohmann::json::array();

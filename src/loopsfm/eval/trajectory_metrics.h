@@ -8,7 +8,12 @@
 //             world_from_cam rotation with the alignment's rotation applied;
 //   RPE       optional relative pose error between frames `rpe_step` apart in the ground
 //             truth, with the alignment's scale applied to the estimated translations;
-//   coverage  matched frames over ground-truth frames.
+//   coverage  matched frames over ground-truth frames;
+//   loop gap  for each ground-truth revisit (two frames far apart in the sequence whose true
+//             centres are close), the length of the difference between the aligned
+//             estimated offset and the true offset between them: how far the two ends of
+//             a loop disagree. Drift that is not closed shows here even where the ATE,
+//             averaged over the whole path, stays small.
 //
 // Joining frames by name (see JoinTrajectoriesByName):
 //   1. an estimated frame whose name equals the ground-truth name exactly;
@@ -37,6 +42,12 @@ struct TrajectoryEvalOptions {
   int rpe_step = 1;
   // Matched frames needed to align and score (the Sim3 needs at least 3).
   int min_matched_frames = 3;
+  // Loop gap: a revisit pairs a frame with the closest later frame at least this many
+  // ground-truth frames away (0: a fifth of the ground-truth frames, at least 10) whose true
+  // centre is within loop_max_distance_steps times the median distance between consecutive
+  // ground-truth centres.
+  int loop_min_frame_gap = 0;
+  double loop_max_distance_steps = 3.0;
   void Check() const;  // throws InvalidArgument
 };
 
@@ -67,6 +78,20 @@ struct RelativePoseErrors {
   // Mean / max of the rotation angle of E in degrees.
   double rotation_mean_deg = 0.0;
   double rotation_max_deg = 0.0;
+};
+
+// Loop gaps over the ground-truth revisits whose two frames are both matched.
+struct LoopGaps {
+  int min_frame_gap = 0;
+  // Largest distance between the true centres of a revisit's two frames (gt units).
+  double max_distance = 0.0;
+  size_t num_revisits = 0;
+  // |(aligned c_j - aligned c_i) - (gt c_j - gt c_i)| statistics, gt units.
+  double mean = 0.0;
+  double median = 0.0;
+  double max = 0.0;
+  // The revisit with the largest gap (ground-truth names).
+  std::string max_first, max_second;
 };
 
 struct TrajectoryMetrics {
@@ -101,6 +126,8 @@ struct TrajectoryMetrics {
 
   // Present when options.rpe_step > 0 and the alignment succeeded.
   std::optional<RelativePoseErrors> rpe;
+  // Present when the alignment succeeded; num_revisits is 0 where the path never returns.
+  std::optional<LoopGaps> loop_gaps;
 
   // Matched frames in ground-truth order.
   std::vector<FrameError> frames;

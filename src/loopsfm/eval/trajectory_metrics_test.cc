@@ -303,6 +303,55 @@ TEST(TrajectoryMetrics, JsonHoldsMetricsAndFrames) {
   EXPECT_EQ(nlohmann::json::parse(json.dump()), json);
 }
 
+// 1.2 laps of a circle with 100 frames a lap: frames 100-119 revisit frames 0-19.
+std::vector<TrajectoryEntry> LapAndAFifth() {
+  std::vector<TrajectoryEntry> entries = LoopTrajectory(100);
+  for (int i = 100; i < 120; ++i) {
+    entries.push_back({FrameName(i), entries[i - 100].world_from_cam});
+  }
+  return entries;
+}
+
+TEST(TrajectoryMetrics, LoopGapIsZeroForAClosedLoopAndAbsentWithoutRevisits) {
+  const auto gt = LapAndAFifth();
+  // Half a step: only the exact revisits count (frames 20-22 are also within three steps
+  // of frame 119).
+  TrajectoryEvalOptions options;
+  options.loop_max_distance_steps = 0.5;
+  TrajectoryMetrics m = EvaluateTrajectory(gt, gt, options);
+  ASSERT_TRUE(m.loop_gaps.has_value());
+  EXPECT_EQ(m.loop_gaps->min_frame_gap, 24);  // a fifth of 120 frames
+  EXPECT_EQ(m.loop_gaps->num_revisits, 20u);
+  EXPECT_LT(m.loop_gaps->max, 1e-9);
+
+  // Half a lap never comes back.
+  const auto half = LoopTrajectory(200);
+  const std::vector<TrajectoryEntry> open(half.begin(), half.begin() + 100);
+  m = EvaluateTrajectory(open, open, options);
+  ASSERT_TRUE(m.loop_gaps.has_value());
+  EXPECT_EQ(m.loop_gaps->num_revisits, 0u);
+  EXPECT_TRUE(std::isnan(m.loop_gaps->max));
+}
+
+TEST(TrajectoryMetrics, LoopGapMeasuresHowFarTheSecondPassIsOff) {
+  const auto gt = LapAndAFifth();
+  // The second pass is shifted by 0.2 (2 % of the radius), as if drift went unclosed; the
+  // first lap is exact. The ATE spreads the shift over all frames, the loop gap does not.
+  const Eigen::Vector3d shift(0.12, -0.16, 0.0);
+  std::vector<TrajectoryEntry> estimated = gt;
+  for (int i = 100; i < 120; ++i) estimated[i].world_from_cam.translation += shift;
+  TrajectoryEvalOptions options;
+  options.loop_max_distance_steps = 0.5;
+  const TrajectoryMetrics m = EvaluateTrajectory(estimated, gt, options);
+  ASSERT_TRUE(m.loop_gaps.has_value());
+  EXPECT_EQ(m.loop_gaps->num_revisits, 20u);
+  EXPECT_NEAR(m.loop_gaps->median, 0.2, 0.02);
+  EXPECT_NEAR(m.loop_gaps->max, 0.2, 0.02);
+  EXPECT_LT(m.ate_rmse, 0.5 * m.loop_gaps->median);
+  const nlohmann::json json = ToJson(m, false);
+  EXPECT_EQ(json["loop_gaps"]["num_revisits"].get<size_t>(), 20u);
+}
+
 TEST(TrajectoryMetrics, OptionsAreChecked) {
   TrajectoryEvalOptions options;
   options.rpe_step = -1;
@@ -310,6 +359,9 @@ TEST(TrajectoryMetrics, OptionsAreChecked) {
   options = {};
   options.min_matched_frames = 2;
   EXPECT_THROW(EvaluateTrajectory(std::vector<TrajectoryEntry>{}, {}, options), InvalidArgument);
+  options = {};
+  options.loop_max_distance_steps = 0.0;
+  EXPECT_THROW(options.Check(), InvalidArgument);
 }
 
 }  // namespace
