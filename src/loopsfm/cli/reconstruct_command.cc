@@ -3,6 +3,7 @@
 #include "loopsfm/cli/commands.h"
 #include "loopsfm/cli/stage_flags.h"
 #include "loopsfm/pipeline/reconstruct.h"
+#include "loopsfm/util/errors.h"
 #include "loopsfm/util/logging.h"
 
 namespace loopsfm::cli {
@@ -57,6 +58,18 @@ void PrintSummary(const ReconstructReport& report) {
                      "models merged, {} discarded, {} failed bundles\n",
                      "  mapper", m.num_init_trials, m.num_init_accepted, m.num_registered_on_retry,
                      m.num_models_merged, m.num_models_discarded, m.num_failed_bundles);
+  for (const ClosedLoop& loop : m.loops_closed) {
+    out += fmt::format("{:<28}{} -> {}: {} of {} point pairs agree, recent end moved {:.3g} "
+                       "({:.2f} % of the path between), {:.2f} deg, scale {:.4f}; {:.1f} s\n",
+                       "  loop closed", loop.recent_frame, loop.old_frame, loop.num_inliers,
+                       loop.num_correspondences, loop.correction_translation,
+                       100.0 * loop.correction_fraction_of_path, loop.correction_rotation_deg,
+                       loop.correction_scale, loop.seconds);
+  }
+  if (m.num_loops_refused > 0) {
+    out += fmt::format("{:<28}{} refused as too large for drift (see the log)\n", "  loops",
+                       m.num_loops_refused);
+  }
   out += fmt::format("{:<28}{:.1f} s, peak memory {:.0f} MiB\n", "total", report.total_seconds,
                      report.peak_memory_bytes / 1048576.0);
   std::fputs(out.c_str(), stdout);
@@ -72,6 +85,7 @@ void AddReconstructCommand(CLI::App& app) {
     bool text = false;
     bool no_self_calibration = false;
     std::string refine;
+    std::string loop_closing = "posegraph";
   };
   auto flags = std::make_shared<Flags>();
   CLI::App* cmd = app.add_subcommand(
@@ -92,6 +106,11 @@ void AddReconstructCommand(CLI::App& app) {
   cmd->add_flag("--no-self-calibration", flags->no_self_calibration,
                 "Without --intrinsics, start mapping from the guessed focal length (1.2 x the "
                 "image size) instead of estimating it from the pairs' fundamental matrices");
+  cmd->add_option("--loop-closing", flags->loop_closing,
+                  "posegraph: when the camera returns after drift, correct the map while mapping "
+                  "(Sim3 pose graph, then the two ends' points are fused) | none: map without "
+                  "loop closing")
+      ->capture_default_str();
   cmd->callback([flags] {
     ReconstructOptions options;
     options.extract = flags->extract.Resolve();
@@ -101,6 +120,12 @@ void AddReconstructCommand(CLI::App& app) {
       options.mapper.refine_known = options.mapper.refine_unknown =
           IntrinsicsRefinement::Parse(flags->refine);
     }
+    if (flags->loop_closing != "posegraph" && flags->loop_closing != "none") {
+      throw InvalidArgument(fmt::format(
+          "--loop-closing '{}' is not a method; use posegraph (the default) or none",
+          flags->loop_closing));
+    }
+    options.mapper.loop_closure.enabled = flags->loop_closing == "posegraph";
     options.self_calibrate = !flags->no_self_calibration;
     options.write_text = flags->text;
     options.show_progress = !Common().quiet;

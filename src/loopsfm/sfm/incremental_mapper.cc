@@ -6,6 +6,7 @@
 #include <unordered_set>
 
 #include "loopsfm/sfm/initial_pair.h"
+#include "loopsfm/sfm/loop_closure.h"
 #include "loopsfm/sfm/mapper_state.h"
 #include "loopsfm/sfm/model_merger.h"
 #include "loopsfm/util/errors.h"
@@ -80,6 +81,7 @@ void IncrementalMapperOptions::Check() const {
   LOOPSFM_REQUIRE_OPTION(merge_min_num_inliers >= 3, "model merging needs at least 3 inliers");
   LOOPSFM_REQUIRE_OPTION(merge_min_inlier_ratio > 0 && merge_min_inlier_ratio <= 1,
                          "merge inlier ratio must be in (0, 1], got {}", merge_min_inlier_ratio);
+  loop_closure.Check();
 }
 
 namespace {
@@ -95,7 +97,7 @@ class IncrementalMapper {
   IncrementalMapper(const MapperInput& input, const IncrementalMapperOptions& options,
                     MapperReport* report, const MapperProgress& progress)
       : input_(input), options_(options), report_(*report), progress_(progress),
-        random_(options.seed) {}
+        random_(options.seed), loop_closer_(input, options.loop_closure) {}
 
   std::vector<Reconstruction> Run() {
     const std::vector<InitialPairCandidate> candidates = RankInitialPairs(input_, options_);
@@ -245,7 +247,12 @@ class IncrementalMapper {
         ++report_.num_registered;
         failed_at.erase(image_id);
         if (ever_failed.erase(image_id)) ++report_.num_registered_on_retry;
-        if (rec.NumRegImages() >= last_global_size * (1.0 + options_.global_ba_growth)) {
+        if (options_.loop_closure.enabled &&
+            loop_closer_.AfterRegistration(*model, image_id, random_, &report_)) {
+          // Closing ended with a global refinement.
+          last_global_size = rec.NumRegImages();
+          failed_at.clear();
+        } else if (rec.NumRegImages() >= last_global_size * (1.0 + options_.global_ba_growth)) {
           model->GlobalRefinement(&report_);
           last_global_size = rec.NumRegImages();
           failed_at.clear();
@@ -298,6 +305,7 @@ class IncrementalMapper {
   MapperReport& report_;
   MapperProgress progress_;
   Random random_;
+  LoopCloser loop_closer_;
   std::vector<ModelPtr> models_;
   std::unordered_map<const MapperState*, int> merge_failures_;
 };

@@ -39,6 +39,34 @@ struct IntrinsicsRefinement {
   std::string ToString() const;
 };
 
+// Loop closing while mapping (loop_closure.h).
+struct LoopClosureOptions {
+  // Close loops while mapping; false maps exactly as without loop closing.
+  bool enabled = true;
+  // Frames at least this far apart in capture order are two ends of a loop.
+  int min_frame_gap = 50;
+  // A registration is loop evidence when its frame sees this many recent points whose
+  // tracks also hold an old point.
+  int min_frame_correspondences = 15;
+  // Consecutive registrations with evidence that must agree on one similarity, each with
+  // at least min_frame_inliers of its own; over them, at least min_num_inliers inliers and
+  // min_inlier_ratio of the correspondences (reprojection threshold in pixels).
+  int num_consistent = 3;
+  int min_frame_inliers = 8;
+  int min_num_inliers = 50;
+  double min_inlier_ratio = 0.3;
+  double max_reproj_error_px = 8.0;
+  // Plausible drift: the correction moves the recent end by at most this fraction of the
+  // path walked between the two ends, and scales it by at most this factor (either way).
+  double max_correction_fraction_of_path = 0.1;
+  double max_correction_scale = 1.5;
+  // Pose graph: frames sharing this many points are joined by a co-visibility edge; a loop
+  // edge weighs this much more than the others.
+  int covisibility_min_points = 20;
+  double loop_edge_weight = 10.0;
+  void Check() const;
+};
+
 struct IncrementalMapperOptions {
   // Initial pair: fewest inlier matches (pairs with half as many are tried when no pair
   // with this many gives a valid start).
@@ -86,10 +114,28 @@ struct IncrementalMapperOptions {
   double merge_max_reproj_error_px = 8.0;
   int merge_min_num_inliers = 30;
   double merge_min_inlier_ratio = 0.3;
+  LoopClosureOptions loop_closure;
   // Worker threads for bundle adjustment (0: all cores).
   int num_threads = 0;
   uint64_t seed = kDefaultRandomSeed;
   void Check() const;
+};
+
+// One loop closed while mapping, for the report.
+struct ClosedLoop {
+  std::string recent_frame, old_frame;
+  int num_correspondences = 0;
+  int num_inliers = 0;
+  // The correction of the recent end: translation of its newest frame's centre (world
+  // units, and as a fraction of the path walked between the two ends), rotation, scale.
+  double correction_translation = 0.0;
+  double correction_fraction_of_path = 0.0;
+  double correction_rotation_deg = 0.0;
+  double correction_scale = 1.0;
+  // Points of one track that were fused by the refinement after the correction.
+  long long num_points_before = 0;
+  long long num_points_after = 0;
+  double seconds = 0.0;
 };
 
 struct MapperReport {
@@ -117,6 +163,11 @@ struct MapperReport {
   double seconds_local_ba = 0.0;
   double seconds_global_ba = 0.0;
   double seconds_merging = 0.0;
+  // Loops closed while mapping, and windows of consistent evidence refused as implausible
+  // drift (too large a correction).
+  std::vector<ClosedLoop> loops_closed;
+  int num_loops_refused = 0;
+  double seconds_loop_closing = 0.0;
 };
 
 // Called after each registration with (registered in this model, frames in all).

@@ -26,6 +26,10 @@ struct MapperProblemOptions {
   // lie at the start of the walk).
   int extra_points_at_start = 0;
   int overlap = 8;
+  // The second half of the frames walks back along the first half (half a step beside it),
+  // so its frames revisit what the first half saw: a loop. Pairs are then made between
+  // frames whose centres are within `overlap` steps, however far apart in time.
+  bool walk_back = false;
   // Fewest common points for a pair to be verified.
   int min_common = 20;
   uint64_t seed = 7;
@@ -88,7 +92,13 @@ inline MapperProblem MakeMapperProblem(const MapperProblemOptions& options) {
   MapperProblem p;
   const Camera camera = TestCamera();
   p.input.cameras = {camera};
-  const double length = options.step * (options.num_frames - 1);
+  const double length =
+      options.step * (options.walk_back ? options.num_frames / 2 : options.num_frames - 1);
+  // Position along the walk of frame i.
+  auto position = [&](int i) {
+    if (!options.walk_back || i < options.num_frames / 2) return options.step * i;
+    return options.step * (options.num_frames - 1 - i + 0.5);
+  };
   for (int k = 0; k < options.num_points; ++k) {
     p.points.emplace_back(random.UniformReal(-7, length + 7), random.UniformReal(-3.5, 3.5),
                           random.UniformReal(8, 12));
@@ -102,7 +112,7 @@ inline MapperProblem MakeMapperProblem(const MapperProblemOptions& options) {
         Eigen::AngleAxisd(random.Normal(0, 0.02), Eigen::Vector3d::UnitX()) *
         Eigen::AngleAxisd(random.Normal(0, 0.02), Eigen::Vector3d::UnitY()) *
         Eigen::Quaterniond::Identity();
-    const Eigen::Vector3d centre(options.step * i, random.Normal(0, 0.05), random.Normal(0, 0.05));
+    const Eigen::Vector3d centre(position(i), random.Normal(0, 0.05), random.Normal(0, 0.05));
     p.cam_from_world.emplace_back(rotation, -(rotation * centre));
     MapperFrame frame;
     frame.image_id = static_cast<image_t>(i + 1);
@@ -128,7 +138,11 @@ inline MapperProblem MakeMapperProblem(const MapperProblemOptions& options) {
     p.keypoint_point.push_back(std::move(keypoint_point));
   }
   for (int i = 0; i < options.num_frames; ++i) {
-    for (int j = i + 1; j < options.num_frames && j <= i + options.overlap; ++j) {
+    for (int j = i + 1; j < options.num_frames; ++j) {
+      const bool near = options.walk_back
+                            ? std::abs(position(i) - position(j)) <= options.overlap * options.step
+                            : j <= i + options.overlap;
+      if (!near) continue;
       MapperPair pair = MakeTruePair(p, i, j);
       if (static_cast<int>(pair.geometry.inlier_matches.size()) >= options.min_common) {
         p.input.pairs.push_back(std::move(pair));

@@ -1,0 +1,271 @@
+#include "loopsfm/sfm/loop_closure.h"
+
+#include <algorithm>
+#include <cmath>
+#include <map>
+
+#include "loopsfm/estimators/pose_graph.h"
+#include "loopsfm/sfm/mapper_state.h"
+#include "loopsfm/util/errors.h"
+#include "loopsfm/util/logging.h"
+#include "loopsfm/util/timer.h"
+
+namespace loopsfm {
+
+void LoopClosureOptions::Check() const {
+  LOOPSFM_REQUIRE_OPTION(min_frame_gap >= 2, "loop: frame gap must be at least 2, got {}",
+                         min_frame_gap);
+  LOOPSFM_REQUIRE_OPTION(min_frame_correspondences >= 3 && min_frame_inliers >= 3 &&
+                             min_num_inliers >= 3,
+                         "loop: correspondence and inlier counts must be at least 3");
+  LOOPSFM_REQUIRE_OPTION(num_consistent >= 1, "loop: at least one registration must agree");
+  LOOPSFM_REQUIRE_OPTION(min_inlier_ratio > 0 && min_inlier_ratio <= 1,
+                         "loop: inlier ratio must be in (0, 1], got {}", min_inlier_ratio);
+  LOOPSFM_REQUIRE_OPTION(max_reproj_error_px > 0, "loop: error threshold must be positive");
+  LOOPSFM_REQUIRE_OPTION(max_correction_fraction_of_path > 0,
+                         "loop: correction bound must be positive");
+  LOOPSFM_REQUIRE_OPTION(max_correction_scale >= 1.0, "loop: scale bound must be at least 1");
+  LOOPSFM_REQUIRE_OPTION(covisibility_min_points >= 1, "loop: co-visibility needs a point");
+  LOOPSFM_REQUIRE_OPTION(loop_edge_weight > 0, "loop: edge weight must be positive");
+}
+
+LoopCloser::LoopCloser(const MapperInput& input, const LoopClosureOptions& options)
+    : input_(input), options_(options) {
+  for (size_t i = 0; i < input.frames.size(); ++i) {
+    frame_index_[input.frames[i].image_id] = static_cast<int>(i);
+  }
+}
+
+LoopCloser::Evidence LoopCloser::CollectEvidence(const MapperState& model,
+                                                 image_t image_id) const {
+  const Reconstruction& rec = model.reconstruction();
+  const Image& image = rec.GetImage(image_id);
+  const int now = frame_index_.at(image_id);
+  const int old_end = now - options_.min_frame_gap;
+  // Newest and oldest capture index among a point's observations.
+  auto span_of = [&](const Point3D& point) {
+    int lo = now, hi = 0;
+    for (const TrackElement& el : point.track.elements) {
+      const int k = frame_index_.at(el.image_id);
+      lo = std::min(lo, k);
+      hi = std::max(hi, k);
+    }
+    return std::make_pair(lo, hi);
+  };
+  Evidence evidence;
+  evidence.image_id = image_id;
+  if (old_end < 0) return evidence;
+  for (point2D_t idx = 0; idx < image.points2D.size(); ++idx) {
+    const point3D_t recent_id = image.points2D[idx].point3D_id;
+    if (recent_id == kInvalidPoint3DId) continue;
+    const int track = model.TrackOf(image_id, idx);
+    if (track < 0) continue;
+    const std::vector<point3D_t> points = model.PointsOfTrack(track);
+    if (points.size() < 2) continue;
+    const Point3D& recent = rec.GetPoint3D(recent_id);
+    if (span_of(recent).first <= old_end) continue;  // already seen from the old end
+    for (point3D_t old_id : points) {
+      if (old_id == recent_id) continue;
+      const Point3D& old = rec.GetPoint3D(old_id);
+      if (span_of(old).second > old_end) continue;
+      PointCorrespondence c;
+      c.src_xyz = recent.xyz;
+      c.dst_xyz = old.xyz;
+      c.src_obs = {&image, &rec.GetCamera(image.camera_id), image.points2D[idx].xy};
+      c.dst_obs = FirstObservation(rec, old);
+      evidence.correspondences.push_back(c);
+      evidence.old_points.push_back(old_id);
+      break;
+    }
+  }
+  return evidence;
+}
+
+double LoopCloser::PathLength(const Reconstruction& rec, int first, int last) const {
+  double length = 0.0;
+  const Image* previous = nullptr;
+  for (int k = std::max(first, 0); k <= last && k < static_cast<int>(input_.frames.size()); ++k) {
+    const Image& image = rec.GetImage(input_.frames[k].image_id);
+    if (!image.registered) continue;
+    if (previous) length += (image.ProjectionCenter() - previous->ProjectionCenter()).norm();
+    previous = &image;
+  }
+  return length;
+}
+
+bool LoopCloser::AfterRegistration(MapperState& model, image_t image_id, Random& random,
+                                   MapperReport* report) {
+  if (cooldown_ > 0) --cooldown_;
+  Evidence evidence = CollectEvidence(model, image_id);
+  if (static_cast<int>(evidence.correspondences.size()) < options_.min_frame_correspondences) {
+    window_.clear();  // the registrations with evidence must be consecutive
+    return false;
+  }
+  window_.push_back(std::move(evidence));
+  while (static_cast<int>(window_.size()) > options_.num_consistent) window_.pop_front();
+  if (static_cast<int>(window_.size()) < options_.num_consistent || cooldown_ > 0) return false;
+
+  // Points may have moved or gone since older registrations of the window: collect again.
+  std::vector<PointCorrespondence> all;
+  std::vector<size_t> frame_of;
+  std::vector<Evidence> current;
+  for (const Evidence& e : window_) {
+    current.push_back(CollectEvidence(model, e.image_id));
+    for (const PointCorrespondence& c : current.back().correspondences) {
+      all.push_back(c);
+      frame_of.push_back(current.size() - 1);
+    }
+  }
+  const PointAlignment alignment =
+      AlignPointSets(all, options_.max_reproj_error_px, 2000, random);
+  if (!alignment.success || alignment.num_inliers < options_.min_num_inliers ||
+      alignment.num_inliers < options_.min_inlier_ratio * all.size()) {
+    return false;
+  }
+  std::vector<int> frame_inliers(current.size(), 0);
+  for (size_t k = 0; k < all.size(); ++k) frame_inliers[frame_of[k]] += alignment.inlier_mask[k];
+  if (*std::min_element(frame_inliers.begin(), frame_inliers.end()) < options_.min_frame_inliers) {
+    return false;
+  }
+
+  // Plausible as drift?
+  const Reconstruction& rec = model.reconstruction();
+  const Sim3d& old_from_recent = alignment.dst_from_src;
+  const Eigen::Vector3d centre = rec.GetImage(image_id).ProjectionCenter();
+  const double translation = (old_from_recent * centre - centre).norm();
+  std::vector<int> old_indices;
+  for (size_t k = 0; k < all.size(); ++k) {
+    if (alignment.inlier_mask[k]) old_indices.push_back(frame_index_.at(all[k].dst_obs.image->image_id));
+  }
+  std::nth_element(old_indices.begin(), old_indices.begin() + old_indices.size() / 2,
+                   old_indices.end());
+  const int old_index = old_indices[old_indices.size() / 2];
+  const double path = PathLength(rec, old_index, frame_index_.at(image_id));
+  const double fraction = path > 0.0 ? translation / path : std::numeric_limits<double>::infinity();
+  const double scale = old_from_recent.scale;
+  if (fraction > options_.max_correction_fraction_of_path ||
+      std::max(scale, 1.0 / scale) > options_.max_correction_scale) {
+    ++report->num_loops_refused;
+    spdlog::info("loop: refused {} -> {} ({} inliers): a correction of {:.3g} ({:.1f} % of the "
+                 "path between them), scale {:.3f}, is too large for drift",
+                 rec.GetImage(image_id).name, input_.frames[old_index].name, alignment.num_inliers,
+                 translation, 100.0 * fraction, scale);
+    window_.clear();
+    cooldown_ = options_.num_consistent;
+    return false;
+  }
+
+  // Loop edges: each frame of the window to the old frame that sees most of its inlier
+  // partners.
+  std::vector<std::pair<image_t, image_t>> loop_edges;
+  for (size_t f = 0; f < current.size(); ++f) {
+    std::map<image_t, int> votes;
+    for (size_t k = 0, c = 0; k < all.size(); ++k) {
+      if (frame_of[k] != f) continue;
+      const point3D_t old_id = current[f].old_points[c++];
+      if (!alignment.inlier_mask[k]) continue;
+      for (const TrackElement& el : rec.GetPoint3D(old_id).track.elements) ++votes[el.image_id];
+    }
+    if (votes.empty()) continue;
+    const auto best = std::max_element(votes.begin(), votes.end(), [](const auto& a, const auto& b) {
+      return a.second < b.second;
+    });
+    loop_edges.push_back({best->first, current[f].image_id});
+  }
+
+  ClosedLoop loop;
+  loop.recent_frame = rec.GetImage(image_id).name;
+  loop.old_frame = input_.frames[old_index].name;
+  loop.num_correspondences = static_cast<int>(all.size());
+  loop.num_inliers = alignment.num_inliers;
+  loop.correction_translation = translation;
+  loop.correction_fraction_of_path = fraction;
+  loop.correction_rotation_deg = RotationAngleDegrees(old_from_recent.rotation);
+  loop.correction_scale = scale;
+  loop.num_points_before = static_cast<long long>(rec.NumPoints3D());
+  Timer timer;
+  Close(model, old_from_recent, loop_edges, report);
+  loop.num_points_after = static_cast<long long>(model.reconstruction().NumPoints3D());
+  loop.seconds = timer.ElapsedSeconds();
+  report->seconds_loop_closing += loop.seconds;
+  spdlog::info("loop: closed {} -> {} ({} of {} point pairs agree): recent end moved by {:.3g} "
+               "({:.2f} % of the path between), {:.2f} deg, scale {:.4f}; points {} -> {}, {:.1f} s",
+               loop.recent_frame, loop.old_frame, loop.num_inliers, loop.num_correspondences,
+               loop.correction_translation, 100.0 * loop.correction_fraction_of_path,
+               loop.correction_rotation_deg, loop.correction_scale, loop.num_points_before,
+               loop.num_points_after, loop.seconds);
+  report->loops_closed.push_back(std::move(loop));
+  window_.clear();
+  cooldown_ = options_.min_frame_gap / 2;
+  return true;
+}
+
+void LoopCloser::Close(MapperState& model, const Sim3d& old_from_recent,
+                       const std::vector<std::pair<image_t, image_t>>& loop_edges,
+                       MapperReport* report) {
+  Reconstruction& rec = model.reconstruction();
+  PoseGraph graph;
+  std::vector<image_t> ordered;  // registered frames in capture order
+  for (const MapperFrame& frame : input_.frames) {
+    const Image& image = rec.GetImage(frame.image_id);
+    if (!image.registered) continue;
+    graph.AddNode(frame.image_id, ToSim3(image.cam_from_world.Inverse()));
+    ordered.push_back(frame.image_id);
+  }
+  auto add_measured_edge = [&](image_t a, image_t b, double weight) {
+    graph.AddEdge({.node1 = a, .node2 = b, .measured = graph.RelativeFromNodes(a, b),
+                   .rotation_weight = weight, .translation_weight = weight,
+                   .scale_weight = weight});
+  };
+  // Consecutive frames keep the path connected; co-visible pairs keep its shape.
+  for (size_t i = 0; i + 1 < ordered.size(); ++i) add_measured_edge(ordered[i], ordered[i + 1], 1.0);
+  for (const MapperPair& pair : input_.pairs) {
+    const image_t a = pair.pair.image_id1, b = pair.pair.image_id2;
+    if (!graph.HasNode(a) || !graph.HasNode(b)) continue;
+    if (std::abs(frame_index_.at(a) - frame_index_.at(b)) <= 1) continue;
+    const Image& image_a = rec.GetImage(a);
+    const Image& image_b = rec.GetImage(b);
+    int shared = 0;
+    for (const FeatureMatch& m : pair.geometry.inlier_matches) {
+      const point3D_t id = image_a.points2D[m.point2D_idx1].point3D_id;
+      shared += id != kInvalidPoint3DId && id == image_b.points2D[m.point2D_idx2].point3D_id;
+    }
+    if (shared >= options_.covisibility_min_points) add_measured_edge(a, b, 1.0);
+  }
+  const double w = options_.loop_edge_weight;
+  for (const auto& [old_id, recent_id] : loop_edges) {
+    const Sim3d measured =
+        Compose(graph.Node(old_id).Inverse(), Compose(old_from_recent, graph.Node(recent_id)));
+    graph.AddEdge({.node1 = old_id, .node2 = recent_id, .measured = measured,
+                   .rotation_weight = w, .translation_weight = w, .scale_weight = w});
+  }
+  const image_t gauge = model.GaugeFirst() != kInvalidImageId && graph.HasNode(model.GaugeFirst())
+                            ? model.GaugeFirst()
+                            : ordered.front();
+  graph.SetConstant(gauge);
+  const std::map<image_t, Sim3d> before = graph.Nodes();
+  PoseGraphOptions pg_options;
+  pg_options.num_threads = model.options().num_threads;
+  if (!graph.Optimize(pg_options)) {
+    spdlog::warn("loop: pose graph failed ({}); the model is left as it was",
+                 graph.report().termination);
+    return;
+  }
+
+  // Points move with the observing frame in the middle of their track (capture order).
+  for (auto& [id, point] : rec.Points3D()) {
+    std::vector<std::pair<int, image_t>> observers;
+    for (const TrackElement& el : point.track.elements) {
+      observers.push_back({frame_index_.at(el.image_id), el.image_id});
+    }
+    std::nth_element(observers.begin(), observers.begin() + observers.size() / 2, observers.end());
+    const image_t ref = observers[observers.size() / 2].second;
+    point.xyz = graph.Node(ref) * (before.at(ref).Inverse() * point.xyz);
+  }
+  for (const auto& [id, node] : graph.Nodes()) {
+    rec.GetImage(id).cam_from_world = ToRigid3(node).Inverse();
+  }
+  model.GlobalRefinement(report);
+}
+
+}  // namespace loopsfm

@@ -1,0 +1,67 @@
+#pragma once
+// Loop closing while mapping (pose graph).
+//
+// Detection in the map: a track may hold several 3D points (mapper_state.h). When the
+// camera comes back to a place after drift, the frame just registered observes recent
+// points whose tracks also hold old points, made by frames far back in time, that its
+// observations did not fit. Those pairs of points are loop evidence. A similarity
+// old_from_recent is estimated from them (LO-RANSAC, point_alignment.h), and a loop is
+// accepted only when it is supported by several consecutive registrations (each with
+// inliers of its own: ORB-SLAM's consecutive-coincidence test) and the correction it asks
+// for is plausible as drift (small against the path walked between the two ends, scale
+// change within bounds), so a repeated facade does not close a false loop.
+//
+// Correction: a Sim3 pose graph (estimators/pose_graph.h) over all registered frames with
+// edges between consecutive frames and co-visible pairs (pairs that share points in the
+// map, measured as the map has them) and loop edges from the similarity; frames move to
+// the optimised poses, each point with a frame that observes it, and a global refinement
+// (bundle, re-triangulation that merges points of one track that now agree, filtering)
+// fuses the two ends. Mapping then goes on from the consistent map.
+#include <deque>
+#include <string>
+#include <unordered_map>
+#include <vector>
+
+#include "loopsfm/math/random.h"
+#include "loopsfm/sfm/incremental_mapper.h"
+#include "loopsfm/sfm/point_alignment.h"
+
+namespace loopsfm {
+
+class MapperState;
+
+class LoopCloser {
+ public:
+  LoopCloser(const MapperInput& input, const LoopClosureOptions& options);
+
+  // Call after `image_id` was registered (and its local bundle ran). Collects its loop
+  // evidence and, when a consistent loop is found, corrects the model (pose graph, global
+  // refinement). Returns true when it did.
+  bool AfterRegistration(MapperState& model, image_t image_id, Random& random,
+                         MapperReport* report);
+
+ private:
+  struct Evidence {
+    image_t image_id = kInvalidImageId;
+    // src: a recent point the frame observes; dst: an old point of the same track.
+    std::vector<PointCorrespondence> correspondences;
+    std::vector<point3D_t> old_points;
+  };
+
+  Evidence CollectEvidence(const MapperState& model, image_t image_id) const;
+  // Path length along the registered frames in capture order between two capture indices.
+  double PathLength(const Reconstruction& rec, int first, int last) const;
+  void Close(MapperState& model, const Sim3d& old_from_recent,
+             const std::vector<std::pair<image_t, image_t>>& loop_edges, MapperReport* report);
+
+  const MapperInput& input_;
+  const LoopClosureOptions& options_;
+  // Capture index of each frame.
+  std::unordered_map<image_t, int> frame_index_;
+  // Evidence of the latest registrations, oldest first.
+  std::deque<Evidence> window_;
+  // Registrations left before another loop may be closed.
+  int cooldown_ = 0;
+};
+
+}  // namespace loopsfm
