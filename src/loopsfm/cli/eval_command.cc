@@ -1,18 +1,65 @@
+#include <array>
 #include <cstdio>
+#include <map>
 
 #include <fmt/format.h>
 
 #include "loopsfm/cli/commands.h"
 #include "loopsfm/eval/trajectory_metrics.h"
+#include "loopsfm/report/top_view.h"
 #include "loopsfm/scene/dataset_files.h"
 #include "loopsfm/storage/colmap_model.h"
+#include "loopsfm/util/errors.h"
 
 namespace loopsfm::cli {
+
+namespace {
+
+// Ground truth and each scored model's aligned centres, in ground-truth order; the largest
+// loop gap of the first model drawn between its two frames.
+void WritePlot(const std::string& file, const std::vector<TrajectoryEntry>& ground_truth,
+               const std::vector<TrajectoryMetrics>& all, const std::vector<std::string>& names) {
+  const std::array<std::array<unsigned char, 3>, 2> colours = {{{30, 90, 220}, {220, 60, 40}}};
+  std::vector<TopViewPath> paths = {{"ground truth", {}, {150, 150, 150}}};
+  for (const TrajectoryEntry& e : ground_truth) paths[0].centres.push_back(e.world_from_cam.translation);
+  std::vector<TopViewSegments> segments;
+  for (size_t m = 0; m < all.size(); ++m) {
+    const TrajectoryMetrics& metrics = all[m];
+    if (!metrics.aligned) {
+      throw InvalidArgument(fmt::format("cannot plot '{}': {}", names[m], metrics.explanation));
+    }
+    const std::string gap =
+        metrics.loop_gaps && metrics.loop_gaps->num_revisits > 0
+            ? fmt::format(", loop gap max {:.3g}", metrics.loop_gaps->max)
+            : std::string();
+    TopViewPath path{fmt::format("{} (ATE {:.3f} % of path{})", names[m],
+                                 100.0 * metrics.ate_fraction_of_path, gap),
+                     {}, colours[m % colours.size()]};
+    std::map<std::string, Eigen::Vector3d> aligned;
+    for (const FrameError& f : metrics.frames) {
+      aligned[f.gt_name] = f.aligned_centre;
+      path.centres.push_back(f.aligned_centre);
+    }
+    paths.push_back(std::move(path));
+    if (m == 0 && metrics.loop_gaps && metrics.loop_gaps->num_revisits > 0) {
+      const LoopGaps& g = *metrics.loop_gaps;
+      if (aligned.count(g.max_first) && aligned.count(g.max_second)) {
+        segments.push_back({"largest loop gap: its two frames",
+                            {{aligned.at(g.max_first), aligned.at(g.max_second)}},
+                            {0, 160, 0}});
+      }
+    }
+  }
+  WriteTopView(file, paths, segments, "top view, aligned to the ground truth");
+}
+
+}  // namespace
 
 void AddEvalCommand(CLI::App& app) {
   struct Flags {
     std::string model, groundtruth;
     bool json = false;
+    std::string plot, plot_also;
   };
   auto flags = std::make_shared<Flags>();
   CLI::App* cmd = app.add_subcommand(
@@ -24,12 +71,32 @@ void AddEvalCommand(CLI::App& app) {
                   "Ground truth: 'name tx ty tz qx qy qz qw' per line, camera-to-world")
       ->required();
   cmd->add_flag("--json", flags->json, "Print the metrics as JSON");
+  cmd->add_option("--plot", flags->plot,
+                  "Also write a top view (PNG) of the ground truth and the model's path aligned "
+                  "to it, with the largest loop gap marked");
+  cmd->add_option("--plot-also", flags->plot_also,
+                  "With --plot: a second model or trajectory drawn in the same view (e.g. the "
+                  "same run with --loop-closing none)");
   cmd->callback([flags] {
     const auto ground_truth = ReadTrajectoryFile(flags->groundtruth);
-    const TrajectoryMetrics metrics =
-        std::filesystem::is_directory(flags->model)
-            ? EvaluateTrajectory(ReadColmapModel(flags->model), ground_truth)
-            : EvaluateTrajectory(ReadTrajectoryFile(flags->model), ground_truth);
+    if (!flags->plot_also.empty() && flags->plot.empty()) {
+      throw InvalidArgument("--plot-also needs --plot FILE.png (the view to draw it in)");
+    }
+    auto evaluate = [&](const std::string& model) {
+      return std::filesystem::is_directory(model)
+                 ? EvaluateTrajectory(ReadColmapModel(model), ground_truth)
+                 : EvaluateTrajectory(ReadTrajectoryFile(model), ground_truth);
+    };
+    const TrajectoryMetrics metrics = evaluate(flags->model);
+    if (!flags->plot.empty()) {
+      std::vector<TrajectoryMetrics> plotted = {metrics};
+      std::vector<std::string> names = {flags->model};
+      if (!flags->plot_also.empty()) {
+        plotted.push_back(evaluate(flags->plot_also));
+        names.push_back(flags->plot_also);
+      }
+      WritePlot(flags->plot, ground_truth, plotted, names);
+    }
     if (flags->json) {
       std::puts(ToJson(metrics, false).dump(2).c_str());
       return;

@@ -284,6 +284,7 @@ TrajectoryMetrics EvaluateTrajectory(const std::vector<TrajectoryEntry>& estimat
     const Rigid3d aligned =
         AlignPose(*gt_from_est, estimated[matches[i].estimated_index].world_from_cam);
     FrameError& frame = metrics.frames[i];
+    frame.aligned_centre = aligned.translation;
     frame.position_error = (aligned.translation - gt.translation).norm();
     frame.rotation_error_deg = RotationAngleDegrees(gt.rotation.inverse() * aligned.rotation);
     position_errors.push_back(frame.position_error);

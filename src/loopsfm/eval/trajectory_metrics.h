@@ -24,6 +24,8 @@
 //      frames) are ambiguous and never used for joining.
 // Each estimated frame is joined to at most one ground-truth frame.
 
+#include <cmath>
+
 #include <nlohmann/json.hpp>
 #include <optional>
 #include <string>
@@ -63,6 +65,9 @@ struct FrameError {
   double position_error = 0.0;
   // Angle of R_gt^T * R_aligned in degrees; NaN when no alignment could be computed.
   double rotation_error_deg = 0.0;
+  // The estimated centre mapped into the ground-truth world by the alignment (NaN when
+  // none could be computed).
+  Eigen::Vector3d aligned_centre = Eigen::Vector3d::Constant(std::nan(""));
 };
 
 // Relative pose errors over the pairs (k, k + step) of ground-truth frames that are both

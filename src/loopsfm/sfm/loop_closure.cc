@@ -42,38 +42,41 @@ LoopCloser::Evidence LoopCloser::CollectEvidence(const MapperState& model,
   const Image& image = rec.GetImage(image_id);
   const int now = frame_index_.at(image_id);
   const int old_end = now - options_.min_frame_gap;
-  // Newest and oldest capture index among a point's observations.
-  auto span_of = [&](const Point3D& point) {
-    int lo = now, hi = 0;
+  // Which end a point belongs to, from its observations other than this frame's:
+  // +1 recent (all after old_end), -1 old (all at or before it), 0 both or none.
+  auto side_of = [&](const Point3D& point) {
+    bool any_old = false, any_recent = false;
     for (const TrackElement& el : point.track.elements) {
-      const int k = frame_index_.at(el.image_id);
-      lo = std::min(lo, k);
-      hi = std::max(hi, k);
+      if (el.image_id == image_id) continue;
+      (frame_index_.at(el.image_id) <= old_end ? any_old : any_recent) = true;
     }
-    return std::make_pair(lo, hi);
+    return any_old == any_recent ? 0 : (any_recent ? 1 : -1);
   };
   Evidence evidence;
   evidence.image_id = image_id;
   if (old_end < 0) return evidence;
   for (point2D_t idx = 0; idx < image.points2D.size(); ++idx) {
-    const point3D_t recent_id = image.points2D[idx].point3D_id;
-    if (recent_id == kInvalidPoint3DId) continue;
+    const point3D_t seen_id = image.points2D[idx].point3D_id;
+    if (seen_id == kInvalidPoint3DId) continue;
     const int track = model.TrackOf(image_id, idx);
     if (track < 0) continue;
     const std::vector<point3D_t> points = model.PointsOfTrack(track);
     if (points.size() < 2) continue;
-    const Point3D& recent = rec.GetPoint3D(recent_id);
-    if (span_of(recent).first <= old_end) continue;  // already seen from the old end
-    for (point3D_t old_id : points) {
-      if (old_id == recent_id) continue;
+    const int seen_side = side_of(rec.GetPoint3D(seen_id));
+    if (seen_side == 0) continue;
+    for (point3D_t other_id : points) {
+      if (other_id == seen_id || side_of(rec.GetPoint3D(other_id)) != -seen_side) continue;
+      const point3D_t recent_id = seen_side > 0 ? seen_id : other_id;
+      const point3D_t old_id = seen_side > 0 ? other_id : seen_id;
+      const Point3D& recent = rec.GetPoint3D(recent_id);
       const Point3D& old = rec.GetPoint3D(old_id);
-      if (span_of(old).second > old_end) continue;
       PointCorrespondence c;
       c.src_xyz = recent.xyz;
       c.dst_xyz = old.xyz;
-      c.src_obs = {&image, &rec.GetCamera(image.camera_id), image.points2D[idx].xy};
+      c.src_obs = FirstObservation(rec, recent);
       c.dst_obs = FirstObservation(rec, old);
       evidence.correspondences.push_back(c);
+      evidence.recent_points.push_back(recent_id);
       evidence.old_points.push_back(old_id);
       break;
     }
@@ -155,22 +158,33 @@ bool LoopCloser::AfterRegistration(MapperState& model, image_t image_id, Random&
     return false;
   }
 
-  // Loop edges: each frame of the window to the old frame that sees most of its inlier
-  // partners.
+  // Loop edges, one per registration of the window: between the old frame that sees most
+  // of its inlier old points and the recent frame that sees most of their recent partners.
   std::vector<std::pair<image_t, image_t>> loop_edges;
+  auto most_votes = [&](const std::map<image_t, int>& votes) {
+    return std::max_element(votes.begin(), votes.end(), [](const auto& a, const auto& b) {
+             return a.second < b.second;
+           })->first;
+  };
   for (size_t f = 0; f < current.size(); ++f) {
-    std::map<image_t, int> votes;
+    std::map<image_t, int> old_votes, recent_votes;
     for (size_t k = 0, c = 0; k < all.size(); ++k) {
       if (frame_of[k] != f) continue;
-      const point3D_t old_id = current[f].old_points[c++];
+      const size_t here = c++;
       if (!alignment.inlier_mask[k]) continue;
-      for (const TrackElement& el : rec.GetPoint3D(old_id).track.elements) ++votes[el.image_id];
+      for (const TrackElement& el : rec.GetPoint3D(current[f].old_points[here]).track.elements) {
+        ++old_votes[el.image_id];
+      }
+      for (const TrackElement& el : rec.GetPoint3D(current[f].recent_points[here]).track.elements) {
+        ++recent_votes[el.image_id];
+      }
     }
-    if (votes.empty()) continue;
-    const auto best = std::max_element(votes.begin(), votes.end(), [](const auto& a, const auto& b) {
-      return a.second < b.second;
-    });
-    loop_edges.push_back({best->first, current[f].image_id});
+    if (old_votes.empty() || recent_votes.empty()) continue;
+    const image_t old_frame = most_votes(old_votes), recent_frame = most_votes(recent_votes);
+    if (std::find(loop_edges.begin(), loop_edges.end(), std::make_pair(old_frame, recent_frame)) ==
+        loop_edges.end()) {
+      loop_edges.push_back({old_frame, recent_frame});
+    }
   }
 
   ClosedLoop loop;
@@ -217,12 +231,13 @@ void LoopCloser::Close(MapperState& model, const Sim3d& old_from_recent,
                    .rotation_weight = weight, .translation_weight = weight,
                    .scale_weight = weight});
   };
-  // Consecutive frames keep the path connected; co-visible pairs keep its shape.
-  for (size_t i = 0; i + 1 < ordered.size(); ++i) add_measured_edge(ordered[i], ordered[i + 1], 1.0);
+  // Co-visible pairs (sharing points in the map) keep the path's shape. Consecutive frames
+  // keep it connected, weakly where they share no points: a registration that jumped onto
+  // the old map must not hold the drifted end in place.
+  std::map<std::pair<image_t, image_t>, int> shared_points;
   for (const MapperPair& pair : input_.pairs) {
     const image_t a = pair.pair.image_id1, b = pair.pair.image_id2;
     if (!graph.HasNode(a) || !graph.HasNode(b)) continue;
-    if (std::abs(frame_index_.at(a) - frame_index_.at(b)) <= 1) continue;
     const Image& image_a = rec.GetImage(a);
     const Image& image_b = rec.GetImage(b);
     int shared = 0;
@@ -230,7 +245,14 @@ void LoopCloser::Close(MapperState& model, const Sim3d& old_from_recent,
       const point3D_t id = image_a.points2D[m.point2D_idx1].point3D_id;
       shared += id != kInvalidPoint3DId && id == image_b.points2D[m.point2D_idx2].point3D_id;
     }
+    shared_points[{std::min(a, b), std::max(a, b)}] = shared;
     if (shared >= options_.covisibility_min_points) add_measured_edge(a, b, 1.0);
+  }
+  for (size_t i = 0; i + 1 < ordered.size(); ++i) {
+    const image_t a = ordered[i], b = ordered[i + 1];
+    const auto it = shared_points.find({std::min(a, b), std::max(a, b)});
+    if (it != shared_points.end() && it->second >= options_.covisibility_min_points) continue;
+    add_measured_edge(a, b, 0.1);
   }
   const double w = options_.loop_edge_weight;
   for (const auto& [old_id, recent_id] : loop_edges) {

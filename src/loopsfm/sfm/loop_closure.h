@@ -2,9 +2,12 @@
 // Loop closing while mapping (pose graph).
 //
 // Detection in the map: a track may hold several 3D points (mapper_state.h). When the
-// camera comes back to a place after drift, the frame just registered observes recent
-// points whose tracks also hold old points, made by frames far back in time, that its
-// observations did not fit. Those pairs of points are loop evidence. A similarity
+// camera comes back to a place after drift, the frame just registered observes points
+// whose tracks hold both a recent point (seen only by frames near it in time) and an old
+// point (seen only by frames far back), which disagree. Either the frame still follows the
+// drifted recent map and its observations did not fit the old points, or its registration
+// jumped onto the old map and the frames just before it hold the recent points: both are
+// loop evidence, pairs of (recent, old) points. A similarity
 // old_from_recent is estimated from them (LO-RANSAC, point_alignment.h), and a loop is
 // accepted only when it is supported by several consecutive registrations (each with
 // inliers of its own: ORB-SLAM's consecutive-coincidence test) and the correction it asks
@@ -43,9 +46,9 @@ class LoopCloser {
  private:
   struct Evidence {
     image_t image_id = kInvalidImageId;
-    // src: a recent point the frame observes; dst: an old point of the same track.
+    // src: the recent point of a track; dst: its old point.
     std::vector<PointCorrespondence> correspondences;
-    std::vector<point3D_t> old_points;
+    std::vector<point3D_t> recent_points, old_points;
   };
 
   Evidence CollectEvidence(const MapperState& model, image_t image_id) const;
