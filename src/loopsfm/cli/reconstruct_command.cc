@@ -58,6 +58,10 @@ void PrintSummary(const ReconstructReport& report) {
                      "models merged, {} discarded, {} failed bundles\n",
                      "  mapper", m.num_init_trials, m.num_init_accepted, m.num_registered_on_retry,
                      m.num_models_merged, m.num_models_discarded, m.num_failed_bundles);
+  out += fmt::format("{:<28}detection {:.1f} s, {} closed ({:.1f} s), {} refused as too large "
+                     "for drift\n",
+                     "  loop closing", m.seconds_loop_detection, m.loops_closed.size(),
+                     m.seconds_loop_closing, m.num_loops_refused);
   for (const ClosedLoop& loop : m.loops_closed) {
     out += fmt::format("{:<28}{} -> {}: {} of {} point pairs agree, recent end moved {:.3g} "
                        "({:.2f} % of the path between), {:.2f} deg, scale {:.4f}; {:.1f} s\n",
@@ -65,10 +69,6 @@ void PrintSummary(const ReconstructReport& report) {
                        loop.num_correspondences, loop.correction_translation,
                        100.0 * loop.correction_fraction_of_path, loop.correction_rotation_deg,
                        loop.correction_scale, loop.seconds);
-  }
-  if (m.num_loops_refused > 0) {
-    out += fmt::format("{:<28}{} refused as too large for drift (see the log)\n", "  loops",
-                       m.num_loops_refused);
   }
   out += fmt::format("{:<28}{:.1f} s, peak memory {:.0f} MiB\n", "total", report.total_seconds,
                      report.peak_memory_bytes / 1048576.0);

@@ -167,6 +167,8 @@ struct MapperReport {
   // drift (too large a correction).
   std::vector<ClosedLoop> loops_closed;
   int num_loops_refused = 0;
+  // Looking for loop evidence after each registration, and correcting the loops found.
+  double seconds_loop_detection = 0.0;
   double seconds_loop_closing = 0.0;
 };
 

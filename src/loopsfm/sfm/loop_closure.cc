@@ -98,6 +98,14 @@ double LoopCloser::PathLength(const Reconstruction& rec, int first, int last) co
 
 bool LoopCloser::AfterRegistration(MapperState& model, image_t image_id, Random& random,
                                    MapperReport* report) {
+  Timer timer;
+  const bool closed = DetectAndClose(model, image_id, random, report);
+  report->seconds_loop_detection += timer.ElapsedSeconds();
+  return closed;
+}
+
+bool LoopCloser::DetectAndClose(MapperState& model, image_t image_id, Random& random,
+                                MapperReport* report) {
   if (cooldown_ > 0) --cooldown_;
   Evidence evidence = CollectEvidence(model, image_id);
   if (static_cast<int>(evidence.correspondences.size()) < options_.min_frame_correspondences) {
@@ -202,6 +210,7 @@ bool LoopCloser::AfterRegistration(MapperState& model, image_t image_id, Random&
   loop.num_points_after = static_cast<long long>(model.reconstruction().NumPoints3D());
   loop.seconds = timer.ElapsedSeconds();
   report->seconds_loop_closing += loop.seconds;
+  report->seconds_loop_detection -= loop.seconds;  // counted once, as closing
   spdlog::info("loop: closed {} -> {} ({} of {} point pairs agree): recent end moved by {:.3g} "
                "({:.2f} % of the path between), {:.2f} deg, scale {:.4f}; points {} -> {}, {:.1f} s",
                loop.recent_frame, loop.old_frame, loop.num_inliers, loop.num_correspondences,

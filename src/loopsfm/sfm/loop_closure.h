@@ -51,6 +51,7 @@ class LoopCloser {
     std::vector<point3D_t> recent_points, old_points;
   };
 
+  bool DetectAndClose(MapperState& model, image_t image_id, Random& random, MapperReport* report);
   Evidence CollectEvidence(const MapperState& model, image_t image_id) const;
   // Path length along the registered frames in capture order between two capture indices.
   double PathLength(const Reconstruction& rec, int first, int last) const;

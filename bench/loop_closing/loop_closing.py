@@ -1,0 +1,121 @@
+#!/usr/bin/env python3
+"""Loop closing on one database: `--loop-closing none` against `posegraph`, side by side.
+
+For each set the first run builds the database (frames, features, pairs); the other method
+maps a copy of it, so both see the same matches. Intrinsics may be made wrong on purpose
+(--focal-factor 1.04: focal 4 % too long, held fixed), which makes drift. Prints registered
+frames, models, ATE (% of path), rotation error, loop gap (mean / max, ground-truth units),
+map time, the loops closed and their time, and writes a top view per set
+(OUT/<set>_top.png: ground truth, posegraph, none).
+
+  bench/loop_closing/loop_closing.py --set NAME INPUT GROUNDTRUTH INTRINSICS \\
+      [--set ...] [--focal-factor F] [--out DIR] [--loopsfm build/loopsfm]
+"""
+import argparse
+import json
+import os
+import re
+import shutil
+import sqlite3
+import struct
+import subprocess
+import sys
+import time
+
+
+def scaled_intrinsics(src, dst, factor):
+    """Writes the intrinsics file with fx, fy (or f) times factor."""
+    line = [l for l in open(src) if l.strip() and not l.startswith('#')][0].split()
+    model, values = line[0], [float(v) for v in line[3:]]
+    n_focal = 2 if model in ('PINHOLE', 'OPENCV', 'FULL_OPENCV', 'OPENCV_FISHEYE') else 1
+    for k in range(n_focal):
+        values[k] *= factor
+    with open(dst, 'w') as f:
+        f.write(' '.join(line[:3] + [repr(v) for v in values]) + '\n')
+    return values
+
+
+def set_database_camera(db, params):
+    """Resumed runs keep the database's camera: write the (wrong) parameters into it."""
+    con = sqlite3.connect(db)
+    for camera_id, blob in list(con.execute('select camera_id, params from cameras')):
+        old = struct.unpack('%dd' % (len(blob) // 8), blob)
+        new = list(params) + list(old[len(params):])
+        con.execute('update cameras set params=? where camera_id=?',
+                    (struct.pack('%dd' % len(new), *new), camera_id))
+    con.commit()
+
+
+def run(cmd, log):
+    start = time.time()
+    with open(log, 'w') as f:
+        rc = subprocess.call(cmd, stdout=f, stderr=subprocess.STDOUT)
+    if rc != 0:
+        sys.exit(f'failed ({rc}): {" ".join(cmd)}; see {log}')
+    return time.time() - start
+
+
+def summary(log):
+    text = open(log).read()
+    map_s = re.search(r'time map\s+([\d.]+) s', text)
+    loops = re.findall(r'loop closed\s+(.*)', text)
+    loop_s = sum(float(x) for x in re.findall(r'; ([\d.]+) s$', '\n'.join(loops), re.M))
+    models = len(re.findall(r'^model \d+ \(', text, re.M))
+    return float(map_s.group(1)) if map_s else float('nan'), loops, loop_s, models
+
+
+def evaluate(loopsfm, model, gt):
+    out = subprocess.check_output([loopsfm, 'eval', model, gt, '--json'])
+    return json.loads(out)
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.split('\n')[0])
+    parser.add_argument('--set', nargs=4, action='append', required=True,
+                        metavar=('NAME', 'INPUT', 'GROUNDTRUTH', 'INTRINSICS'))
+    parser.add_argument('--focal-factor', type=float, default=1.0)
+    parser.add_argument('--out', default='loop_closing_out')
+    parser.add_argument('--loopsfm', default='build/loopsfm')
+    args = parser.parse_args()
+    os.makedirs(args.out, exist_ok=True)
+    rows = []
+    for name, media, gt, intrinsics in args.set:
+        base = os.path.join(args.out, name)
+        intr = base + '.intrinsics.txt'
+        params = scaled_intrinsics(intrinsics, intr, args.focal_factor)
+        outputs = {}
+        for method in ('none', 'posegraph'):
+            out = f'{base}_{method}'
+            if method != 'none':
+                shutil.rmtree(out, ignore_errors=True)
+                os.makedirs(out)
+                shutil.copy(f'{base}_none/database.db', out)
+            elif os.path.exists(os.path.join(out, 'database.db')):
+                set_database_camera(os.path.join(out, 'database.db'), params)
+                shutil.rmtree(os.path.join(out, 'sparse'), ignore_errors=True)
+            run([args.loopsfm, 'reconstruct', media, '-o', out, '--intrinsics', intr,
+                 '--loop-closing', method], out + '.log')
+            outputs[method] = out
+            map_s, loops, loop_s, models = summary(out + '.log')
+            m = evaluate(args.loopsfm, os.path.join(out, 'sparse', '0'), gt)
+            gaps = m.get('loop_gaps') or {}
+            rows.append((name, method, m['num_matched'], m['num_gt_frames'], models,
+                         100 * (m['ate_fraction_of_path'] or float('nan')),
+                         m['rotation_error_mean_deg'], gaps.get('mean'), gaps.get('max'),
+                         map_s, len(loops), loop_s))
+        subprocess.check_call([args.loopsfm, 'eval', os.path.join(outputs['posegraph'], 'sparse', '0'),
+                               gt, '--plot', base + '_top.png', '--plot-also',
+                               os.path.join(outputs['none'], 'sparse', '0')],
+                              stdout=subprocess.DEVNULL)
+    print(f'focal factor {args.focal_factor}')
+    print('| set | loop closing | frames | models | ATE % path | rot. err deg | loop gap mean | '
+          'loop gap max | map s | loops closed | closing s |')
+    print('|---|---|---|---|---|---|---|---|---|---|---|')
+    fmt = lambda v, f: 'n/a' if v is None else format(v, f)
+    for r in rows:
+        print(f'| {r[0]} | {r[1]} | {r[2]}/{r[3]} | {r[4]} | {r[5]:.4f} | {r[6]:.3f} | '
+              f'{fmt(r[7], ".4g")} | {fmt(r[8], ".4g")} | {r[9]:.1f} | {r[10]} | {r[11]:.1f} |')
+
+
+if __name__ == '__main__':
+    main()
