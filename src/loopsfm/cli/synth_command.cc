@@ -85,6 +85,9 @@ void AddSynthCommand(CLI::App& app) {
       ->capture_default_str();
   cmd->add_option("--laps", options->street_laps, "Street: full laps of the route")
       ->capture_default_str();
+  cmd->add_flag("--repeated-facades", options->street_repeated_facades,
+                "Street: identical buildings (one size, one texture) around each block, so "
+                "places far apart look the same");
   cmd->add_option("--revisit", options->street_revisit_fraction,
                   "Street: fraction of the route walked again after the laps")
       ->capture_default_str();

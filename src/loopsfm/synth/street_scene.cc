@@ -76,6 +76,25 @@ void AddBox(const Eigen::Vector3d& min, const Eigen::Vector3d& max, Random* rng,
   world->boxes.push_back(box);
 }
 
+// A 3 x 2 grid of identical buildings: one size, one material, the texture anchored at
+// each building's corner.
+void AddRepeatedBlockBuildings(const Eigen::Vector2d& center, Random* rng, SyntheticWorld* world) {
+  const int material = static_cast<int>(world->materials.size());
+  world->materials.push_back(RandomFacadeMaterial(rng));
+  const double width = 2.0 * kBlockHalfX / 3.0, depth = kBlockHalfY;
+  for (int i = 0; i < 3; ++i) {
+    for (int j = 0; j < 2; ++j) {
+      TexturedBox box;
+      box.min = Eigen::Vector3d(center.x() - kBlockHalfX + i * width + 0.3,
+                                center.y() - kBlockHalfY + j * depth + 0.3, 0.0);
+      box.max = box.min + Eigen::Vector3d(width - 0.6, depth - 0.6, 9.0);
+      box.material = material;
+      box.texture_origin = box.min;
+      world->boxes.push_back(box);
+    }
+  }
+}
+
 // A 3 x 2 grid of buildings filling the block centred at `center`, each set back a little
 // from the street and of its own height and texture.
 void AddBlockBuildings(const Eigen::Vector2d& center, Random* rng, SyntheticWorld* world) {
@@ -265,8 +284,10 @@ void BuildStreetScene(const SynthOptions& options, SyntheticScene* scene) {
   // The blocks walked around: buildings first, then pillars in front of them.
   const Eigen::Vector2d block_a = Eigen::Vector2d::Zero();
   const Eigen::Vector2d block_b(2.0 * kMirrorX, 0.0);
-  AddBlockBuildings(block_a, &rng, &world);
-  if (figure8) AddBlockBuildings(block_b, &rng, &world);
+  const auto add_buildings =
+      options.street_repeated_facades ? AddRepeatedBlockBuildings : AddBlockBuildings;
+  add_buildings(block_a, &rng, &world);
+  if (figure8) add_buildings(block_b, &rng, &world);
   scene->num_block_buildings = static_cast<int>(world.boxes.size());
   AddPillars(block_a, &rng, &world);
   if (figure8) AddPillars(block_b, &rng, &world);

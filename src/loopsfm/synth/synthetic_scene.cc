@@ -154,8 +154,10 @@ void SynthOptions::Check() const {
   LOOPSFM_REQUIRE_OPTION(street_revisit_fraction >= 0.0 && street_revisit_fraction <= 1.0,
                          "street_revisit_fraction must be in [0, 1], got {}",
                          street_revisit_fraction);
-  LOOPSFM_REQUIRE_OPTION(street_laps >= 1 && street_laps <= 100,
-                         "street_laps must be between 1 and 100, got {}", street_laps);
+  LOOPSFM_REQUIRE_OPTION(street_laps >= 0 && street_laps <= 100,
+                         "street_laps must be between 0 and 100, got {}", street_laps);
+  LOOPSFM_REQUIRE_OPTION(street_laps + street_revisit_fraction > 0.0,
+                         "a street walk needs --laps 1 or more or a --revisit fraction above 0");
   LOOPSFM_REQUIRE_OPTION(street_route == "block" || street_route == "figure8",
                          "unknown street route '{}'; use 'block' or 'figure8'", street_route);
   LOOPSFM_REQUIRE_OPTION(street_look_ahead_degrees >= 0.0 && street_look_ahead_degrees <= 60.0,
@@ -171,7 +173,7 @@ void SynthOptions::Check() const {
                          street_look_ahead_degrees);
   LOOPSFM_REQUIRE_OPTION(scene == "street" || (street_laps == 1 && street_route == "block" &&
                                                street_look_ahead_degrees == 0.0 &&
-                                               !street_abrupt_turns),
+                                               !street_abrupt_turns && !street_repeated_facades),
                          "street_laps, street_route, street_look_ahead_degrees and "
                          "street_abrupt_turns apply to the street scene only, not to '{}'",
                          scene);

@@ -58,8 +58,12 @@ struct SynthOptions {
   double cylinder_arc_degrees = 380.0;
   // Street scene: fraction of the route that is walked again after the full laps.
   double street_revisit_fraction = 0.1;
-  // Street scene: full laps of the route before the revisit (2 with 0.3 walks 2.3 laps).
+  // Street scene: full laps of the route before the revisit (2 with 0.3 walks 2.3 laps; 0
+  // with 0.7 walks 70 % of the route and never comes back).
   int street_laps = 1;
+  // Street scene: the buildings of each block are identical (one size, one material, the
+  // texture anchored at each building's corner), so places far apart look the same.
+  bool street_repeated_facades = false;
   // Street scene: "block" (around one block, counter-clockwise) or "figure8" (around block A
   // counter-clockwise, then around its neighbour B clockwise, filming the block walked around).
   std::string street_route = "block";

@@ -181,6 +181,7 @@ std::optional<SurfaceHit> CastBox(const TexturedBox& box, const Eigen::Vector3d&
   hit.normal[enter_axis] = d[enter_axis] > 0.0 ? -1.0 : 1.0;
   hit.kind = SurfaceKind::kBox;
   hit.material = box.material;
+  hit.texture_origin = box.texture_origin;
   return hit;
 }
 
@@ -274,7 +275,7 @@ Eigen::Vector3d SyntheticWorld::Shade(const std::optional<SurfaceHit>& hit,
   // 20 times, so that the horizon keeps a little texture).
   const double cos_incidence = std::max(std::abs(hit->normal.dot(direction)), 0.05);
   const double footprint = hit->distance * pixel_angle / cos_incidence;
-  const Eigen::Vector3d albedo = materials[hit->material].Albedo(hit->point_in_world, footprint);
+  const Eigen::Vector3d albedo = materials[hit->material].Albedo(hit->point_in_world - hit->texture_origin, footprint);
   // Lambertian with a soft fill: surfaces facing away from the light keep some contrast.
   const double lighting = 0.55 + 0.45 * hit->normal.dot(light_direction);
   return albedo * lighting;

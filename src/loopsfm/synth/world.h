@@ -69,6 +69,9 @@ struct TexturedBox {
   Eigen::Vector3d min = Eigen::Vector3d::Zero();
   Eigen::Vector3d max = Eigen::Vector3d::Ones();
   int material = 0;
+  // The texture is the material's noise at (point - texture_origin): boxes of one material
+  // with their origins at the same corner look alike (repeated facades).
+  Eigen::Vector3d texture_origin = Eigen::Vector3d::Zero();
 };
 
 enum class SurfaceKind { kGround, kCylinder, kBox };
@@ -83,6 +86,8 @@ struct SurfaceHit {
   // Index of the surface among those of its kind (0 for the ground).
   int index = 0;
   int material = 0;
+  // Subtracted from point_in_world where the material's texture is looked up.
+  Eigen::Vector3d texture_origin = Eigen::Vector3d::Zero();
 };
 
 struct SyntheticWorld {
