@@ -66,7 +66,7 @@ TEST(SynthOptions, CheckRejectsBadOptions) {
   expect_rejected(bad, "unknown street route 'loop'");
   bad = options;
   bad.scene = "street";
-  bad.street_laps = 0;
+  bad.street_laps = -1;
   expect_rejected(bad, "street_laps");
   bad = options;
   bad.scene = "street";
@@ -337,6 +337,37 @@ TEST(SyntheticScene, StreetPathRevisitsItsStart) {
   // While the middle of the path is far from the start.
   EXPECT_GT((scene.world_from_cam[n / 2].translation - scene.world_from_cam[0].translation).norm(),
             10.0);
+}
+
+TEST(SyntheticScene, RepeatedFacadesLookAlikeAndLapsZeroNeverReturns) {
+  SynthOptions options = SmallOptions("street");
+  options.num_frames = 60;
+  options.street_repeated_facades = true;
+  options.street_laps = 0;
+  options.street_revisit_fraction = 0.7;
+  const SyntheticScene scene = MakeScene(options);
+  ASSERT_EQ(scene.num_block_buildings, 6);
+  const auto& boxes = scene.world.boxes;
+  // The same point of two buildings (relative to each one's corner) has the same colour.
+  const Eigen::Vector3d direction(0.0, 1.0, 0.0);  // looking north at south faces
+  for (int b = 1; b < 3; ++b) {
+    for (const Eigen::Vector3d& local : {Eigen::Vector3d(0.7, 0.0, 2.0), Eigen::Vector3d(2.9, 0.0, 5.5)}) {
+      const Eigen::Vector3d origin0 = boxes[0].min + local - 0.1 * direction;
+      const Eigen::Vector3d origin_b = boxes[2 * b].min + local - 0.1 * direction;
+      const auto hit0 = scene.world.CastRay(origin0, direction);
+      const auto hit_b = scene.world.CastRay(origin_b, direction);
+      ASSERT_TRUE(hit0 && hit_b);
+      EXPECT_LT((scene.world.Shade(hit0, direction, 1e-3) - scene.world.Shade(hit_b, direction, 1e-3))
+                    .norm(),
+                1e-9);
+    }
+  }
+  // 70 % of the route: the end is far from the start.
+  EXPECT_GT((scene.world_from_cam.back().translation - scene.world_from_cam.front().translation).norm(),
+            10.0);
+  options.street_laps = 0;
+  options.street_revisit_fraction = 0.0;
+  EXPECT_THROW(options.Check(), InvalidArgument);
 }
 
 TEST(SyntheticScene, SiftFindsHundredsOfFeaturesPerFrame) {
