@@ -44,6 +44,16 @@ def set_database_camera(db, params):
         con.execute('update cameras set params=? where camera_id=?',
                     (struct.pack('%dd' % len(new), *new), camera_id))
     con.commit()
+    con.close()
+
+
+def copy_database(src, dst):
+    """A consistent copy, write-ahead log included."""
+    source = sqlite3.connect(src)
+    target = sqlite3.connect(dst)
+    source.backup(target)
+    target.close()
+    source.close()
 
 
 def run(cmd, log):
@@ -89,7 +99,7 @@ def main():
             if method != 'none':
                 shutil.rmtree(out, ignore_errors=True)
                 os.makedirs(out)
-                shutil.copy(f'{base}_none/database.db', out)
+                copy_database(f'{base}_none/database.db', os.path.join(out, 'database.db'))
             elif os.path.exists(os.path.join(out, 'database.db')):
                 set_database_camera(os.path.join(out, 'database.db'), params)
                 shutil.rmtree(os.path.join(out, 'sparse'), ignore_errors=True)

@@ -97,7 +97,7 @@ class IncrementalMapper {
   IncrementalMapper(const MapperInput& input, const IncrementalMapperOptions& options,
                     MapperReport* report, const MapperProgress& progress)
       : input_(input), options_(options), report_(*report), progress_(progress),
-        random_(options.seed), loop_closer_(input, options.loop_closure) {}
+        random_(options.seed), loop_closer_(input, options.loop_closure, options.seed + 1) {}
 
   std::vector<Reconstruction> Run() {
     const std::vector<InitialPairCandidate> candidates = RankInitialPairs(input_, options_);
@@ -248,7 +248,7 @@ class IncrementalMapper {
         failed_at.erase(image_id);
         if (ever_failed.erase(image_id)) ++report_.num_registered_on_retry;
         if (options_.loop_closure.enabled &&
-            loop_closer_.AfterRegistration(*model, image_id, random_, &report_)) {
+            loop_closer_.AfterRegistration(*model, image_id, &report_)) {
           // Closing ended with a global refinement.
           last_global_size = rec.NumRegImages();
           failed_at.clear();

@@ -29,8 +29,9 @@ void LoopClosureOptions::Check() const {
   LOOPSFM_REQUIRE_OPTION(loop_edge_weight > 0, "loop: edge weight must be positive");
 }
 
-LoopCloser::LoopCloser(const MapperInput& input, const LoopClosureOptions& options)
-    : input_(input), options_(options) {
+LoopCloser::LoopCloser(const MapperInput& input, const LoopClosureOptions& options,
+                       uint64_t seed)
+    : input_(input), options_(options), random_(seed) {
   for (size_t i = 0; i < input.frames.size(); ++i) {
     frame_index_[input.frames[i].image_id] = static_cast<int>(i);
   }
@@ -96,16 +97,14 @@ double LoopCloser::PathLength(const Reconstruction& rec, int first, int last) co
   return length;
 }
 
-bool LoopCloser::AfterRegistration(MapperState& model, image_t image_id, Random& random,
-                                   MapperReport* report) {
+bool LoopCloser::AfterRegistration(MapperState& model, image_t image_id, MapperReport* report) {
   Timer timer;
-  const bool closed = DetectAndClose(model, image_id, random, report);
+  const bool closed = DetectAndClose(model, image_id, report);
   report->seconds_loop_detection += timer.ElapsedSeconds();
   return closed;
 }
 
-bool LoopCloser::DetectAndClose(MapperState& model, image_t image_id, Random& random,
-                                MapperReport* report) {
+bool LoopCloser::DetectAndClose(MapperState& model, image_t image_id, MapperReport* report) {
   if (cooldown_ > 0) --cooldown_;
   Evidence evidence = CollectEvidence(model, image_id);
   if (static_cast<int>(evidence.correspondences.size()) < options_.min_frame_correspondences) {
@@ -128,7 +127,7 @@ bool LoopCloser::DetectAndClose(MapperState& model, image_t image_id, Random& ra
     }
   }
   const PointAlignment alignment =
-      AlignPointSets(all, options_.max_reproj_error_px, 2000, random);
+      AlignPointSets(all, options_.max_reproj_error_px, 2000, random_);
   if (!alignment.success || alignment.num_inliers < options_.min_num_inliers ||
       alignment.num_inliers < options_.min_inlier_ratio * all.size()) {
     return false;

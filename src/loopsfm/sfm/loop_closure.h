@@ -35,13 +35,14 @@ class MapperState;
 
 class LoopCloser {
  public:
-  LoopCloser(const MapperInput& input, const LoopClosureOptions& options);
+  LoopCloser(const MapperInput& input, const LoopClosureOptions& options,
+             uint64_t seed = kDefaultRandomSeed);
 
   // Call after `image_id` was registered (and its local bundle ran). Collects its loop
   // evidence and, when a consistent loop is found, corrects the model (pose graph, global
-  // refinement). Returns true when it did.
-  bool AfterRegistration(MapperState& model, image_t image_id, Random& random,
-                         MapperReport* report);
+  // refinement). Returns true when it did. Draws from its own random numbers, so a mapping
+  // where no loop is closed is the same as one without loop closing.
+  bool AfterRegistration(MapperState& model, image_t image_id, MapperReport* report);
 
  private:
   struct Evidence {
@@ -51,7 +52,7 @@ class LoopCloser {
     std::vector<point3D_t> recent_points, old_points;
   };
 
-  bool DetectAndClose(MapperState& model, image_t image_id, Random& random, MapperReport* report);
+  bool DetectAndClose(MapperState& model, image_t image_id, MapperReport* report);
   Evidence CollectEvidence(const MapperState& model, image_t image_id) const;
   // Path length along the registered frames in capture order between two capture indices.
   double PathLength(const Reconstruction& rec, int first, int last) const;
@@ -60,6 +61,7 @@ class LoopCloser {
 
   const MapperInput& input_;
   const LoopClosureOptions& options_;
+  Random random_;
   // Capture index of each frame.
   std::unordered_map<image_t, int> frame_index_;
   // Evidence of the latest registrations, oldest first.

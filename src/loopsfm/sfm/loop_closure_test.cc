@@ -51,11 +51,10 @@ IncrementalMapperOptions LoopOptions() {
 // Offers the last frames to the loop closer as if they had just been registered.
 MapperReport OfferLastFrames(const MapperProblem& p, MapperState& state, int count) {
   MapperReport report;
-  LoopCloser closer(p.input, state.options().loop_closure);
-  Random random(5);
+  LoopCloser closer(p.input, state.options().loop_closure, 5);
   const size_t n = p.input.frames.size();
   for (size_t i = n - count; i < n; ++i) {
-    closer.AfterRegistration(state, p.input.frames[i].image_id, random, &report);
+    closer.AfterRegistration(state, p.input.frames[i].image_id, &report);
   }
   return report;
 }
