@@ -86,6 +86,7 @@ void AddReconstructCommand(CLI::App& app) {
     bool no_self_calibration = false;
     std::string refine;
     std::string loop_closing = "posegraph";
+    bool withhold_loop_pairs = false;
   };
   auto flags = std::make_shared<Flags>();
   CLI::App* cmd = app.add_subcommand(
@@ -111,6 +112,10 @@ void AddReconstructCommand(CLI::App& app) {
                   "(Sim3 pose graph, then the two ends' points are fused) | none: map without "
                   "loop closing")
       ->capture_default_str();
+  cmd->add_flag("--withhold-loop-pairs", flags->withhold_loop_pairs,
+                "Evaluation: map without the pairs between frames 50 or more apart, then add "
+                "them and close the loops at the end (drift grows unchecked until then; compare "
+                "with --loop-closing none)");
   cmd->callback([flags] {
     ReconstructOptions options;
     options.extract = flags->extract.Resolve();
@@ -126,6 +131,7 @@ void AddReconstructCommand(CLI::App& app) {
           flags->loop_closing));
     }
     options.mapper.loop_closure.enabled = flags->loop_closing == "posegraph";
+    options.mapper.loop_closure.withhold_loop_pairs = flags->withhold_loop_pairs;
     options.self_calibrate = !flags->no_self_calibration;
     options.write_text = flags->text;
     options.show_progress = !Common().quiet;

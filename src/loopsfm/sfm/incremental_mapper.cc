@@ -318,8 +318,21 @@ std::vector<Reconstruction> RunIncrementalMapper(const MapperInput& input,
                                                  const MapperProgress& progress) {
   options.Check();
   MapperReport local;
-  IncrementalMapper mapper(input, options, report ? report : &local, progress);
-  return mapper.Run();
+  MapperReport* out = report ? report : &local;
+  if (!options.loop_closure.withhold_loop_pairs) {
+    IncrementalMapper mapper(input, options, out, progress);
+    return mapper.Run();
+  }
+  const MapperInput withheld = WithoutLoopPairs(input, options.loop_closure.min_frame_gap);
+  spdlog::info("mapper: {} loop pairs withheld until the end ({} pairs, {} tracks left)",
+               input.pairs.size() - withheld.pairs.size(), withheld.pairs.size(),
+               withheld.tracks.size());
+  IncrementalMapperOptions mapping = options;
+  mapping.loop_closure.withhold_loop_pairs = false;
+  IncrementalMapper mapper(withheld, mapping, out, progress);
+  std::vector<Reconstruction> models = mapper.Run();
+  if (!models.empty()) models[0] = CloseLoopsAfterMapping(input, models[0], options, out);
+  return models;
 }
 
 }  // namespace loopsfm

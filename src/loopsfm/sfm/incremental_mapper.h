@@ -43,6 +43,11 @@ struct IntrinsicsRefinement {
 struct LoopClosureOptions {
   // Close loops while mapping; false maps exactly as without loop closing.
   bool enabled = true;
+  // Evaluation: map without the pairs between frames min_frame_gap or more apart, then add
+  // them and close the loops of the largest model at the end (CloseLoopsAfterMapping), as if
+  // they had been found late. Drift then grows unchecked until the end, which shows what
+  // loop closing corrects.
+  bool withhold_loop_pairs = false;
   // Frames at least this far apart in capture order are two ends of a loop.
   int min_frame_gap = 50;
   // A registration is loop evidence when its frame sees this many recent points whose

@@ -6,6 +6,7 @@
 
 #include "loopsfm/estimators/pose_graph.h"
 #include "loopsfm/sfm/mapper_state.h"
+#include "loopsfm/tracks/track_builder.h"
 #include "loopsfm/util/errors.h"
 #include "loopsfm/util/logging.h"
 #include "loopsfm/util/timer.h"
@@ -27,6 +28,58 @@ void LoopClosureOptions::Check() const {
   LOOPSFM_REQUIRE_OPTION(max_correction_scale >= 1.0, "loop: scale bound must be at least 1");
   LOOPSFM_REQUIRE_OPTION(covisibility_min_points >= 1, "loop: co-visibility needs a point");
   LOOPSFM_REQUIRE_OPTION(loop_edge_weight > 0, "loop: edge weight must be positive");
+}
+
+MapperInput WithoutLoopPairs(const MapperInput& input, int min_frame_gap) {
+  std::unordered_map<image_t, int> index;
+  std::unordered_map<image_t, size_t> num_points2D;
+  for (size_t i = 0; i < input.frames.size(); ++i) {
+    index[input.frames[i].image_id] = static_cast<int>(i);
+    num_points2D[input.frames[i].image_id] = input.frames[i].points2D.size();
+  }
+  MapperInput withheld;
+  withheld.cameras = input.cameras;
+  withheld.frames = input.frames;
+  for (const MapperPair& pair : input.pairs) {
+    if (std::abs(index.at(pair.pair.image_id1) - index.at(pair.pair.image_id2)) < min_frame_gap) {
+      withheld.pairs.push_back(pair);
+    }
+  }
+  std::vector<VerifiedPairMatches> verified;
+  for (const MapperPair& pair : withheld.pairs) {
+    verified.push_back({pair.pair, &pair.geometry.inlier_matches});
+  }
+  withheld.tracks = BuildTracks(num_points2D, verified, {}, nullptr);
+  return withheld;
+}
+
+Reconstruction CloseLoopsAfterMapping(const MapperInput& input, const Reconstruction& model,
+                                      const IncrementalMapperOptions& options,
+                                      MapperReport* report) {
+  Timer timer;
+  MapperState state(input, options);
+  Reconstruction& rec = state.reconstruction();
+  for (const auto& [id, camera] : model.Cameras()) rec.GetCamera(id) = camera;
+  std::vector<image_t> ordered;
+  for (const MapperFrame& frame : input.frames) {
+    if (!model.ExistsImage(frame.image_id) || !model.IsRegistered(frame.image_id)) continue;
+    rec.GetImage(frame.image_id).cam_from_world = model.GetImage(frame.image_id).cam_from_world;
+    rec.RegisterImage(frame.image_id);
+    ordered.push_back(frame.image_id);
+  }
+  if (ordered.size() < 2) return model;
+  state.SetGauge(ordered[0], ordered[1]);
+  for (image_t id : ordered) state.TriangulateImage(id);
+  const double seconds_triangulation = timer.ElapsedSeconds();
+  report->seconds_triangulation += seconds_triangulation;
+  if (options.loop_closure.enabled) {
+    LoopCloser closer(input, options.loop_closure, options.seed + 1);
+    for (image_t id : ordered) closer.AfterRegistration(state, id, report);
+  }
+  state.GlobalRefinement(report);
+  spdlog::info("loop pairs added after mapping: {} loops closed, {:.1f} s",
+               report->loops_closed.size(), timer.ElapsedSeconds());
+  return rec;
 }
 
 LoopCloser::LoopCloser(const MapperInput& input, const LoopClosureOptions& options,

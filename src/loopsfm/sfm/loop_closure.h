@@ -33,6 +33,20 @@ namespace loopsfm {
 
 class MapperState;
 
+// The input without the pairs between frames min_frame_gap or more apart in capture order,
+// tracks rebuilt from the rest: what a mapper sees when the loop pairs are withheld.
+MapperInput WithoutLoopPairs(const MapperInput& input, int min_frame_gap);
+
+// Loop closing on a finished model, for loop pairs that come after mapping: the model's
+// frames and cameras are taken into a state over `input` (which holds the loop pairs), its
+// tracks are triangulated frame by frame in capture order (the two ends of a drifted loop
+// get points of their own), the frames are offered to the loop closer in capture order, and
+// a global refinement ends it. With loop closing disabled only the triangulation and the
+// refinement run: what a global bundle adjustment makes of the loop pairs on its own.
+Reconstruction CloseLoopsAfterMapping(const MapperInput& input, const Reconstruction& model,
+                                      const IncrementalMapperOptions& options,
+                                      MapperReport* report);
+
 class LoopCloser {
  public:
   LoopCloser(const MapperInput& input, const LoopClosureOptions& options,
