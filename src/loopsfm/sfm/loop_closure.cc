@@ -73,7 +73,7 @@ Reconstruction CloseLoopsAfterMapping(const MapperInput& input, const Reconstruc
   const double seconds_triangulation = timer.ElapsedSeconds();
   report->seconds_triangulation += seconds_triangulation;
   if (options.loop_closure.enabled) {
-    LoopCloser closer(input, options.loop_closure, options.seed + 1);
+    LoopCloser closer(input, options.loop_closure, options.seed + 1, /*refine=*/false);
     for (image_t id : ordered) closer.AfterRegistration(state, id, report);
   }
   state.GlobalRefinement(report);
@@ -83,8 +83,8 @@ Reconstruction CloseLoopsAfterMapping(const MapperInput& input, const Reconstruc
 }
 
 LoopCloser::LoopCloser(const MapperInput& input, const LoopClosureOptions& options,
-                       uint64_t seed)
-    : input_(input), options_(options), random_(seed) {
+                       uint64_t seed, bool refine)
+    : input_(input), options_(options), random_(seed), refine_(refine) {
   for (size_t i = 0; i < input.frames.size(); ++i) {
     frame_index_[input.frames[i].image_id] = static_cast<int>(i);
   }
@@ -348,7 +348,11 @@ void LoopCloser::Close(MapperState& model, const Sim3d& old_from_recent,
   for (const auto& [id, node] : graph.Nodes()) {
     rec.GetImage(id).cam_from_world = ToRigid3(node).Inverse();
   }
-  model.GlobalRefinement(report);
+  if (refine_) {
+    model.GlobalRefinement(report);
+  } else {
+    model.RetriangulateAll();
+  }
 }
 
 }  // namespace loopsfm

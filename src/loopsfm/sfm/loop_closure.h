@@ -49,8 +49,11 @@ Reconstruction CloseLoopsAfterMapping(const MapperInput& input, const Reconstruc
 
 class LoopCloser {
  public:
+  // refine: after each correction, a global refinement (bundle, re-triangulation, merging,
+  // filtering) so mapping can go on from it; otherwise only the points of one track that
+  // now agree are merged, and the caller refines once at the end.
   LoopCloser(const MapperInput& input, const LoopClosureOptions& options,
-             uint64_t seed = kDefaultRandomSeed);
+             uint64_t seed = kDefaultRandomSeed, bool refine = true);
 
   // Call after `image_id` was registered (and its local bundle ran). Collects its loop
   // evidence and, when a consistent loop is found, corrects the model (pose graph, global
@@ -76,6 +79,7 @@ class LoopCloser {
   const MapperInput& input_;
   const LoopClosureOptions& options_;
   Random random_;
+  bool refine_ = true;
   // Capture index of each frame.
   std::unordered_map<image_t, int> frame_index_;
   // Evidence of the latest registrations, oldest first.
