@@ -68,7 +68,7 @@ struct LoopClosureOptions {
   // Pose graph: frames sharing this many points are joined by a co-visibility edge; a loop
   // edge weighs this much more than the others.
   int covisibility_min_points = 20;
-  double loop_edge_weight = 10.0;
+  double loop_edge_weight = 100.0;
   void Check() const;
 };
 

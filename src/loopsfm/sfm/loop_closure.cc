@@ -271,7 +271,9 @@ bool LoopCloser::DetectAndClose(MapperState& model, image_t image_id, MapperRepo
                loop.num_points_after, loop.seconds);
   report->loops_closed.push_back(std::move(loop));
   window_.clear();
-  cooldown_ = options_.min_frame_gap / 2;
+  // While mapping, each closing ends with a global refinement: wait for more of the loop.
+  // After mapping, closing is cheap and each window of the overlap corrects what is left.
+  cooldown_ = refine_ ? options_.min_frame_gap / 2 : options_.num_consistent;
   return true;
 }
 
