@@ -15,6 +15,14 @@ namespace loopsfm::cli {
 
 namespace {
 
+// A short name for a model in the legend: OUT for OUT/sparse/0, else the file name.
+std::string ModelLabel(const std::string& model) {
+  std::filesystem::path path = std::filesystem::path(model).lexically_normal();
+  if (path.filename().empty()) path = path.parent_path();
+  if (path.parent_path().filename() == "sparse") return path.parent_path().parent_path().filename().string();
+  return path.filename().string();
+}
+
 // Ground truth and each scored model's aligned centres, in ground-truth order; the largest
 // loop gap of the first model drawn between its two frames.
 void WritePlot(const std::string& file, const std::vector<TrajectoryEntry>& ground_truth,
@@ -32,7 +40,7 @@ void WritePlot(const std::string& file, const std::vector<TrajectoryEntry>& grou
         metrics.loop_gaps && metrics.loop_gaps->num_revisits > 0
             ? fmt::format(", loop gap max {:.3g}", metrics.loop_gaps->max)
             : std::string();
-    TopViewPath path{fmt::format("{} (ATE {:.3f} % of path{})", names[m],
+    TopViewPath path{fmt::format("{} (ATE {:.3f} % of path{})", ModelLabel(names[m]),
                                  100.0 * metrics.ate_fraction_of_path, gap),
                      {}, colours[m % colours.size()]};
     std::map<std::string, Eigen::Vector3d> aligned;
