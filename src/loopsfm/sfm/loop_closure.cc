@@ -191,6 +191,13 @@ bool LoopCloser::DetectAndClose(MapperState& model, image_t image_id, MapperRepo
     return false;
   }
 
+  // Already closed? Where most inlier pairs agree as they are (their points failed to merge
+  // only by a few pixels), there is nothing to correct.
+  const std::vector<char> as_is = AlignmentInliers(all, Sim3d(), options_.max_reproj_error_px);
+  int agree_as_is = 0;
+  for (size_t k = 0; k < all.size(); ++k) agree_as_is += alignment.inlier_mask[k] && as_is[k];
+  if (agree_as_is >= 0.5 * alignment.num_inliers) return false;
+
   // Plausible as drift?
   const Reconstruction& rec = model.reconstruction();
   const Sim3d& old_from_recent = alignment.dst_from_src;

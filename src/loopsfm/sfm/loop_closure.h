@@ -10,8 +10,9 @@
 // loop evidence, pairs of (recent, old) points. A similarity
 // old_from_recent is estimated from them (LO-RANSAC, point_alignment.h), and a loop is
 // accepted only when it is supported by several consecutive registrations (each with
-// inliers of its own: ORB-SLAM's consecutive-coincidence test) and the correction it asks
-// for is plausible as drift (small against the path walked between the two ends, scale
+// inliers of its own: ORB-SLAM's consecutive-coincidence test), most of its inliers do not
+// already agree as they are (points that missed merging by a few pixels are no loop to
+// close), and the correction it asks for is plausible as drift (small against the path walked between the two ends, scale
 // change within bounds), so a repeated facade does not close a false loop.
 //
 // Correction: a Sim3 pose graph (estimators/pose_graph.h) over all registered frames with

@@ -69,6 +69,17 @@ class Sim3AlignmentEstimator {
 
 }  // namespace
 
+std::vector<char> AlignmentInliers(const std::vector<PointCorrespondence>& correspondences,
+                                   const Sim3d& dst_from_src, double max_reproj_error_px) {
+  std::vector<double> squared;
+  Sim3AlignmentEstimator(correspondences).Residuals(dst_from_src, &squared);
+  std::vector<char> inliers(squared.size());
+  for (size_t k = 0; k < squared.size(); ++k) {
+    inliers[k] = squared[k] <= max_reproj_error_px * max_reproj_error_px;
+  }
+  return inliers;
+}
+
 PointObservation FirstObservation(const Reconstruction& rec, const Point3D& point) {
   const TrackElement& el = point.track.elements.front();
   const Image& image = rec.GetImage(el.image_id);

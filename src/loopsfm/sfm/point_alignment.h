@@ -47,4 +47,8 @@ struct PointAlignment {
 PointAlignment AlignPointSets(const std::vector<PointCorrespondence>& correspondences,
                               double max_reproj_error_px, int max_num_trials, Random& random);
 
+// Which correspondences dst_from_src explains within the threshold (same residual as above).
+std::vector<char> AlignmentInliers(const std::vector<PointCorrespondence>& correspondences,
+                                   const Sim3d& dst_from_src, double max_reproj_error_px);
+
 }  // namespace loopsfm
