@@ -66,23 +66,6 @@ void PoseGraphOptions::Check() const {
                          max_num_iterations);
 }
 
-Sim3d Compose(const Sim3d& a, const Sim3d& b) {
-  Sim3d c;
-  c.scale = a.scale * b.scale;
-  c.rotation = (a.rotation * b.rotation).normalized();
-  c.translation = a * b.translation;
-  return c;
-}
-
-Sim3d ToSim3(const Rigid3d& rigid) {
-  Sim3d sim;
-  sim.rotation = rigid.rotation;
-  sim.translation = rigid.translation;
-  return sim;
-}
-
-Rigid3d ToRigid3(const Sim3d& sim) { return Rigid3d(sim.rotation, sim.translation); }
-
 void PoseGraph::AddNode(image_t id, const Sim3d& world_from_cam) {
   LOOPSFM_CHECK(world_from_cam.scale > 0.0);
   nodes_[id] = world_from_cam;
@@ -97,7 +80,7 @@ void PoseGraph::AddEdge(const PoseGraphEdge& edge) {
 }
 
 Sim3d PoseGraph::RelativeFromNodes(image_t i, image_t j) const {
-  return Compose(Node(i).Inverse(), Node(j));
+  return Node(i).Inverse() * Node(j);
 }
 
 void PoseGraph::SetConstant(image_t id) {

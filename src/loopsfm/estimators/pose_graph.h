@@ -16,7 +16,7 @@
 //
 //   PoseGraph graph;
 //   graph.AddNode(id, world_from_cam);           // as in the drifted model
-//   graph.AddEdge(i, j, MeasuredFromNodes(...));  // consecutive / co-visible frames
+//   graph.AddEdge({i, j, graph.RelativeFromNodes(i, j)});  // consecutive / co-visible
 //   graph.AddEdge(old, recent, loop_measurement, loop_weight);
 //   graph.SetConstant(first);
 //   graph.Optimize(options);                     // nodes hold the corrected poses
@@ -86,12 +86,5 @@ class PoseGraph {
   std::vector<image_t> constant_;
   PoseGraphReport report_;
 };
-
-// Composition of similarities: (a * b)(x) = a(b(x)).
-Sim3d Compose(const Sim3d& a, const Sim3d& b);
-// A rigid world_from_cam as a similarity of scale 1, and back (the scale is dropped: the
-// camera keeps its rotation and centre).
-Sim3d ToSim3(const Rigid3d& rigid);
-Rigid3d ToRigid3(const Sim3d& sim);
 
 }  // namespace loopsfm

@@ -40,10 +40,10 @@ std::vector<Sim3d> Drifted(const std::vector<Sim3d>& truth, double yaw_per_step,
   step_error.rotation = Eigen::AngleAxisd(yaw_per_step, Eigen::Vector3d::UnitY());
   step_error.scale = 1.0;
   for (size_t i = 1; i < truth.size(); ++i) {
-    Sim3d relative = Compose(truth[i - 1].Inverse(), truth[i]);
-    relative = Compose(step_error, relative);
+    Sim3d relative = truth[i - 1].Inverse() * truth[i];
+    relative = step_error * relative;
     relative.translation *= std::pow(scale_per_step, static_cast<double>(i));
-    Sim3d next = Compose(drifted.back(), relative);
+    Sim3d next = drifted.back() * relative;
     next.scale = 1.0;  // a drifted model has no scale of its own per camera
     drifted.push_back(next);
   }
@@ -60,8 +60,8 @@ TEST(PoseGraph, ComposeAndInverseAreConsistent) {
   b.rotation = Eigen::Quaterniond(random.Normal(), random.Normal(), random.Normal(), random.Normal()).normalized();
   b.translation = Eigen::Vector3d(-0.5, 4, 2);
   const Eigen::Vector3d x(0.3, 0.2, -1.1);
-  EXPECT_LT((Compose(a, b) * x - a * (b * x)).norm(), 1e-12);
-  EXPECT_LT((Compose(a.Inverse(), a) * x - x).norm(), 1e-12);
+  EXPECT_LT(((a * b) * x - a * (b * x)).norm(), 1e-12);
+  EXPECT_LT(((a.Inverse() * a) * x - x).norm(), 1e-12);
 }
 
 TEST(PoseGraph, ConsistentMeasurementsAreAFixedPoint) {
@@ -99,7 +99,7 @@ TEST(PoseGraph, LoopEdgeSpreadsRotationAndScaleDrift) {
   Sim3d unscale;
   unscale.scale = 1.0 / sigma;
   graph.AddEdge({.node1 = 0, .node2 = static_cast<image_t>(n - 1),
-                 .measured = Compose(Compose(truth[0].Inverse(), truth[n - 1]), unscale),
+                 .measured = truth[0].Inverse() * truth[n - 1] * unscale,
                  .rotation_weight = 10.0, .translation_weight = 10.0, .scale_weight = 10.0});
   graph.SetConstant(0);
   ASSERT_TRUE(graph.Optimize()) << graph.report().termination;

@@ -112,7 +112,8 @@ LoopGaps ComputeLoopGaps(const std::vector<TrajectoryEntry>& ground_truth,
     const Eigen::Vector3d estimated_offset =
         aligned_by_gt_index[best].translation - aligned_by_gt_index[i].translation;
     const double gap = (estimated_offset - (gt_centre(best) - gt_centre(i))).norm();
-    if (values.empty() || gap > Max(values)) {
+    if (values.empty() || gap > gaps.max) {
+      gaps.max = gap;
       gaps.max_first = ground_truth[i].name;
       gaps.max_second = ground_truth[best].name;
     }
@@ -121,7 +122,6 @@ LoopGaps ComputeLoopGaps(const std::vector<TrajectoryEntry>& ground_truth,
   gaps.num_revisits = values.size();
   gaps.mean = Mean(values);
   gaps.median = Median(values);
-  gaps.max = Max(values);
   return gaps;
 }
 

@@ -40,6 +40,22 @@ struct Sim3d {
   Eigen::Vector3d operator*(const Eigen::Vector3d& x) const {
     return scale * (rotation * x) + translation;
   }
+  // Composition: (c_from_b * b_from_a) maps a to c.
+  Sim3d operator*(const Sim3d& b_from_a) const {
+    Sim3d c_from_a;
+    c_from_a.scale = scale * b_from_a.scale;
+    c_from_a.rotation = (rotation * b_from_a.rotation).normalized();
+    c_from_a.translation = *this * b_from_a.translation;
+    return c_from_a;
+  }
+  // A rigid transform as a similarity of scale 1, and back (the scale is dropped).
+  static Sim3d FromRigid(const Rigid3d& rigid) {
+    Sim3d sim;
+    sim.rotation = rigid.rotation;
+    sim.translation = rigid.translation;
+    return sim;
+  }
+  Rigid3d ToRigid() const { return Rigid3d(rotation, translation); }
   // b_from_a -> a_from_b.
   Sim3d Inverse() const {
     Sim3d inverse;

@@ -164,19 +164,23 @@ bool LoopCloser::DetectAndClose(MapperState& model, image_t image_id, MapperRepo
     window_.clear();  // the registrations with evidence must be consecutive
     return false;
   }
-  window_.push_back(std::move(evidence));
+  window_.push_back(image_id);
   while (static_cast<int>(window_.size()) > options_.num_consistent) window_.pop_front();
   if (static_cast<int>(window_.size()) < options_.num_consistent || cooldown_ > 0) return false;
 
-  // Points may have moved or gone since older registrations of the window: collect again.
+  // Points may have moved or gone since the older registrations of the window: collect
+  // theirs again (this frame's was just collected).
+  std::vector<Evidence> current;
+  for (size_t f = 0; f + 1 < window_.size(); ++f) {
+    current.push_back(CollectEvidence(model, window_[f]));
+  }
+  current.push_back(std::move(evidence));
   std::vector<PointCorrespondence> all;
   std::vector<size_t> frame_of;
-  std::vector<Evidence> current;
-  for (const Evidence& e : window_) {
-    current.push_back(CollectEvidence(model, e.image_id));
-    for (const PointCorrespondence& c : current.back().correspondences) {
+  for (size_t f = 0; f < current.size(); ++f) {
+    for (const PointCorrespondence& c : current[f].correspondences) {
       all.push_back(c);
-      frame_of.push_back(current.size() - 1);
+      frame_of.push_back(f);
     }
   }
   const PointAlignment alignment =
@@ -293,7 +297,7 @@ void LoopCloser::Close(MapperState& model, const Sim3d& old_from_recent,
   for (const MapperFrame& frame : input_.frames) {
     const Image& image = rec.GetImage(frame.image_id);
     if (!image.registered) continue;
-    graph.AddNode(frame.image_id, ToSim3(image.cam_from_world.Inverse()));
+    graph.AddNode(frame.image_id, Sim3d::FromRigid(image.cam_from_world.Inverse()));
     ordered.push_back(frame.image_id);
   }
   auto add_measured_edge = [&](image_t a, image_t b, double weight) {
@@ -327,7 +331,7 @@ void LoopCloser::Close(MapperState& model, const Sim3d& old_from_recent,
   const double w = options_.loop_edge_weight;
   for (const auto& [old_id, recent_id] : loop_edges) {
     const Sim3d measured =
-        Compose(graph.Node(old_id).Inverse(), Compose(old_from_recent, graph.Node(recent_id)));
+        graph.Node(old_id).Inverse() * old_from_recent * graph.Node(recent_id);
     graph.AddEdge({.node1 = old_id, .node2 = recent_id, .measured = measured,
                    .rotation_weight = w, .translation_weight = w, .scale_weight = w});
   }
@@ -355,7 +359,7 @@ void LoopCloser::Close(MapperState& model, const Sim3d& old_from_recent,
     point.xyz = graph.Node(ref) * (before.at(ref).Inverse() * point.xyz);
   }
   for (const auto& [id, node] : graph.Nodes()) {
-    rec.GetImage(id).cam_from_world = ToRigid3(node).Inverse();
+    rec.GetImage(id).cam_from_world = node.ToRigid().Inverse();
   }
   if (refine_) {
     model.GlobalRefinement(report);

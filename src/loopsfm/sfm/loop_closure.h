@@ -83,8 +83,8 @@ class LoopCloser {
   bool refine_ = true;
   // Capture index of each frame.
   std::unordered_map<image_t, int> frame_index_;
-  // Evidence of the latest registrations, oldest first.
-  std::deque<Evidence> window_;
+  // The latest registrations that had evidence, oldest first.
+  std::deque<image_t> window_;
   // Registrations left before another loop may be closed.
   int cooldown_ = 0;
 };
