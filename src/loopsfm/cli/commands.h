@@ -16,6 +16,7 @@ void AddSynthCommand(CLI::App& app);
 void AddReconstructCommand(CLI::App& app);
 void AddEvalCommand(CLI::App& app);
 void AddVocabCommand(CLI::App& app);
+void AddExportCommand(CLI::App& app);
 
 
 }  // namespace loopsfm::cli

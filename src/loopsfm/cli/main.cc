@@ -24,6 +24,7 @@ int main(int argc, char** argv) {
 
   cli::AddReconstructCommand(app);
   cli::AddEvalCommand(app);
+  cli::AddExportCommand(app);
   cli::AddExtractCommand(app);
   cli::AddMatchCommand(app);
   cli::AddTracksCommand(app);

@@ -12,14 +12,23 @@ namespace {
 void PrintSummary(const ReconstructReport& report) {
   std::string out = "\n";
   out += fmt::format("{:<28}{}\n", "frames", report.num_frames);
-  for (size_t m = 0; m < report.models.size(); ++m) {
-    const ModelSummary& s = report.models[m];
+  for (size_t m = 0; m < report.output.models.size(); ++m) {
+    const ModelSummary& s = report.output.models[m];
     out += fmt::format("{:<28} {} registered, {} points, track length {:.2f}, reprojection "
                        "error {:.3f} px\n",
                        fmt::format("model {} ({})", m, s.path.string()), s.num_registered,
                        s.num_points, s.mean_track_length, s.mean_reprojection_error);
   }
-  if (report.models.empty()) out += fmt::format("{:<28}{}\n", "models", "none");
+  if (report.output.models.empty()) out += fmt::format("{:<28}{}\n", "models", "none");
+  if (!report.output.written.empty()) {
+    std::string written;
+    for (const auto& path : report.output.written) {
+      written += (written.empty() ? "" : ", ") + path.filename().string();
+    }
+    out += fmt::format("{:<28}{} ({} frames, {} undistorted, {:.1f} s)\n", "written", written,
+                       report.output.num_images_written, report.output.num_undistorted_written,
+                       report.output.seconds);
+  }
   for (const CameraSelfCalibration& c : report.self_calibration.cameras) {
     out += fmt::format("{:<28}", fmt::format("self-calibration camera {}", c.camera_id));
     if (c.applied) {
@@ -31,8 +40,8 @@ void PrintSummary(const ReconstructReport& report) {
                          c.estimate.explanation);
     }
   }
-  if (!report.models.empty()) {
-    for (const Camera& camera : report.models[0].cameras) {
+  if (!report.output.models.empty()) {
+    for (const Camera& camera : report.output.models[0].cameras) {
       std::string params;
       for (double p : camera.params) params += fmt::format(" {:.6g}", p);
       out += fmt::format("{:<28}{} {}x{}{}\n", fmt::format("model 0 camera {}", camera.camera_id),
@@ -83,6 +92,7 @@ void AddReconstructCommand(CLI::App& app) {
     ExtractFlags extract;
     MatchFlags match;
     bool text = false;
+    std::string export_formats = "default";
     bool no_self_calibration = false;
     std::string refine;
     std::string loop_closing = "posegraph";
@@ -100,6 +110,10 @@ void AddReconstructCommand(CLI::App& app) {
   AddExtractFlags(cmd, &flags->extract);
   AddMatchFlags(cmd, &flags->match);
   cmd->add_flag("--text", flags->text, "Also write the COLMAP model as .txt files");
+  cmd->add_option("--export", flags->export_formats,
+                  std::string("What to write after mapping: ") + kExportFormatsHelp +
+                      "; or all, none, default (all but gsplat)")
+      ->capture_default_str();
   cmd->add_option("--refine", flags->refine,
                   "Intrinsics that global bundle adjustment refines, for every camera: any of "
                   "focal,principal-point,distortion or none (default: focal,distortion without "
@@ -133,7 +147,8 @@ void AddReconstructCommand(CLI::App& app) {
     options.mapper.loop_closure.enabled = flags->loop_closing == "posegraph";
     options.mapper.loop_closure.withhold_loop_pairs = flags->withhold_loop_pairs;
     options.self_calibrate = !flags->no_self_calibration;
-    options.write_text = flags->text;
+    options.output.formats = ParseExportFormats(flags->export_formats);
+    options.output.write_text = flags->text;
     options.show_progress = !Common().quiet;
     const ReconstructReport report = Reconstruct(flags->input, flags->output, options);
     PrintSummary(report);

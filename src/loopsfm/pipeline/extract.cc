@@ -102,6 +102,8 @@ ExtractReport ExtractFeatures(const std::filesystem::path& input, Database& data
 
   // Later stages pick defaults by the kind of input (e.g. loop detection for video).
   database.WriteMeta("source_kind", source->Info().kind == SourceKind::kVideo ? "video" : "images");
+  // Where the frames come from, for exports that need their pixels again (`loopsfm export`).
+  database.WriteMeta("source_path", std::filesystem::absolute(input).lexically_normal().string());
   const int expected = source->Info().expected_frames / options.keyframes.every;
   Progress progress("extract", expected > 0 ? expected : 0, options.show_progress);
   ExtractReport report;

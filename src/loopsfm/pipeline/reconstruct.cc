@@ -20,6 +20,7 @@ void ReconstructOptions::Check() const {
   match.Check();
   self_calibration.Check();
   mapper.Check();
+  output.Check();
 }
 
 MapperInput LoadMapperInput(const Database& database, TrackBuildReport* tracks_report) {
@@ -46,71 +47,6 @@ MapperInput LoadMapperInput(const Database& database, TrackBuildReport* tracks_r
   }
   input.tracks = BuildTracks(num_points2D, verified, {}, tracks_report);
   return input;
-}
-
-void ColorizeFromSource(const fs::path& input, std::vector<Reconstruction>* models) {
-  // name -> (model, image id)
-  std::unordered_map<std::string, std::pair<size_t, image_t>> wanted;
-  for (size_t m = 0; m < models->size(); ++m) {
-    for (image_t id : (*models)[m].RegImageIds()) wanted[(*models)[m].GetImage(id).name] = {m, id};
-  }
-  std::vector<std::unordered_map<point3D_t, Eigen::Vector3d>> sums(models->size());
-  std::vector<std::unordered_map<point3D_t, int>> counts(models->size());
-  std::unique_ptr<FrameSource> source = OpenFrameSource(input);
-  size_t found = 0;
-  while (found < wanted.size()) {
-    std::optional<RawFrame> frame = source->Next();
-    if (!frame) break;
-    auto it = wanted.find(frame->name);
-    if (it == wanted.end()) continue;
-    ++found;
-    const auto [m, image_id] = it->second;
-    const Image& image = (*models)[m].GetImage(image_id);
-    for (const Point2D& p : image.points2D) {
-      if (!p.HasPoint3D()) continue;
-      const int col = std::clamp(static_cast<int>(p.xy.x()), 0, frame->image.cols - 1);
-      const int row = std::clamp(static_cast<int>(p.xy.y()), 0, frame->image.rows - 1);
-      const cv::Vec3b bgr = frame->image.at<cv::Vec3b>(row, col);
-      sums[m][p.point3D_id] += Eigen::Vector3d(bgr[2], bgr[1], bgr[0]);
-      ++counts[m][p.point3D_id];
-    }
-  }
-  for (size_t m = 0; m < models->size(); ++m) {
-    for (auto& [id, point] : (*models)[m].Points3D()) {
-      const auto c = counts[m].find(id);
-      if (c == counts[m].end()) continue;
-      point.color = (sums[m][id] / c->second).array().round().cast<uint8_t>();
-    }
-  }
-}
-
-std::vector<ModelSummary> ExportModels(const std::vector<Reconstruction>& models,
-                                       const fs::path& output_dir, bool write_text) {
-  std::vector<ModelSummary> summaries;
-  const fs::path sparse = output_dir / "sparse";
-  // Stale model folders from an earlier run would mix with this run's models.
-  if (fs::exists(sparse)) fs::remove_all(sparse);
-  for (size_t m = 0; m < models.size(); ++m) {
-    ModelSummary summary;
-    summary.path = sparse / std::to_string(m);
-    fs::create_directories(summary.path);
-    WriteColmapModelBinary(summary.path, models[m]);
-    if (write_text) WriteColmapModelText(summary.path, models[m]);
-    summary.num_registered = models[m].NumRegImages();
-    summary.num_points = models[m].NumPoints3D();
-    for (const auto& [id, camera] : models[m].Cameras()) summary.cameras.push_back(camera);
-    std::sort(summary.cameras.begin(), summary.cameras.end(),
-              [](const Camera& a, const Camera& b) { return a.camera_id < b.camera_id; });
-    summary.mean_track_length = models[m].ComputeMeanTrackLength();
-    Reconstruction copy = models[m];
-    summary.mean_reprojection_error = copy.UpdateReprojectionErrors();
-    summaries.push_back(summary);
-  }
-  if (!models.empty()) {
-    WritePly(output_dir / "points.ply", models[0]);
-    WriteTrajectoryFile(output_dir / "trajectory.txt", TrajectoryFromReconstruction(models[0]));
-  }
-  return summaries;
 }
 
 ReconstructReport Reconstruct(const fs::path& input, const fs::path& output_dir,
@@ -171,8 +107,9 @@ ReconstructReport Reconstruct(const fs::path& input, const fs::path& output_dir,
   }
 
   stage.Restart();
-  ColorizeFromSource(input, &models);
-  report.models = ExportModels(models, output_dir, options.write_text);
+  std::vector<std::string> frame_names;
+  for (const MapperFrame& frame : mapper_input.frames) frame_names.push_back(frame.name);
+  report.output = Export(&models, frame_names, input, output_dir, options.output);
   report.stage_times.push_back({"export", stage.ElapsedSeconds()});
   report.total_seconds = total.ElapsedSeconds();
   report.peak_memory_bytes = PeakResidentBytes();

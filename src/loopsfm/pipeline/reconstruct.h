@@ -2,18 +2,16 @@
 // The whole job in one call: extract, match, map, export. Every stage resumes from what
 // OUT/database.db already holds, so an interrupted run continues where it stopped.
 //
-// Outputs:
-//   OUT/database.db                       COLMAP-compatible database
-//   OUT/sparse/<k>/{cameras,images,points3D}.bin (and .txt with text output), one folder per
-//                                         model, largest first
-//   OUT/points.ply                        coloured point cloud of model 0
-//   OUT/trajectory.txt                    camera-to-world poses of model 0, by frame name
+// Outputs: OUT/database.db (COLMAP-compatible), then what ReconstructOptions::output asks for
+// (pipeline/export.h: COLMAP models, PLY, trajectory, frames, transforms.json, undistorted
+// layout, report).
 
 #include <filesystem>
 #include <functional>
 #include <string>
 #include <vector>
 
+#include "loopsfm/pipeline/export.h"
 #include "loopsfm/pipeline/extract.h"
 #include "loopsfm/pipeline/match.h"
 #include "loopsfm/sfm/incremental_mapper.h"
@@ -28,8 +26,8 @@ struct ReconstructOptions {
   bool self_calibrate = true;
   SelfCalibrationOptions self_calibration;
   IncrementalMapperOptions mapper;
-  // Also write the COLMAP model as text files.
-  bool write_text = false;
+  // What is written after mapping.
+  ExportOptions output;
   // Show progress on stderr.
   bool show_progress = true;
   void Check() const;
@@ -40,15 +38,6 @@ struct StageTime {
   double seconds = 0.0;
 };
 
-struct ModelSummary {
-  std::filesystem::path path;
-  size_t num_registered = 0;
-  size_t num_points = 0;
-  double mean_track_length = 0.0;
-  double mean_reprojection_error = 0.0;
-  // The model's cameras, as refined.
-  std::vector<Camera> cameras;
-};
 
 struct ReconstructReport {
   size_t num_frames = 0;
@@ -57,7 +46,8 @@ struct ReconstructReport {
   TrackBuildReport tracks;
   SelfCalibrationReport self_calibration;
   MapperReport mapper;
-  std::vector<ModelSummary> models;
+  // What the export wrote, with a summary of each model.
+  ExportReport output;
   std::vector<StageTime> stage_times;
   double total_seconds = 0.0;
   long long peak_memory_bytes = 0;
@@ -69,13 +59,5 @@ ReconstructReport Reconstruct(const std::filesystem::path& input,
 
 // Loads frames, keypoints, verified geometries and tracks for the mappers.
 MapperInput LoadMapperInput(const Database& database, TrackBuildReport* tracks_report);
-
-// Writes OUT/sparse/<k>, OUT/points.ply and OUT/trajectory.txt for the given models.
-std::vector<ModelSummary> ExportModels(const std::vector<Reconstruction>& models,
-                                       const std::filesystem::path& output_dir, bool write_text);
-
-// Sets point colours by reading the source frames again (streamed) and averaging the
-// pixel colours of each point's observations.
-void ColorizeFromSource(const std::filesystem::path& input, std::vector<Reconstruction>* models);
 
 }  // namespace loopsfm
