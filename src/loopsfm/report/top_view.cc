@@ -17,6 +17,19 @@ cv::Scalar Bgr(const std::array<unsigned char, 3>& rgb) { return cv::Scalar(rgb[
 
 }  // namespace
 
+TopViewPlane FitTopViewPlane(const std::vector<Eigen::Vector3d>& centres) {
+  LOOPSFM_CHECK(!centres.empty());
+  TopViewPlane plane;
+  for (const auto& c : centres) plane.mean += c;
+  plane.mean /= static_cast<double>(centres.size());
+  Eigen::Matrix3d covariance = Eigen::Matrix3d::Zero();
+  for (const auto& c : centres) covariance += (c - plane.mean) * (c - plane.mean).transpose();
+  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eigen(covariance);
+  plane.axis_u = eigen.eigenvectors().col(2);
+  plane.axis_v = eigen.eigenvectors().col(1);
+  return plane;
+}
+
 void WriteTopView(const std::filesystem::path& file, const std::vector<TopViewPath>& paths,
                   const std::vector<TopViewSegments>& segments, const std::string& title,
                   int size_px) {
@@ -29,18 +42,8 @@ void WriteTopView(const std::filesystem::path& file, const std::vector<TopViewPa
   }
   if (!reference) throw InvalidArgument("top view: no path with two or more camera centres to plot");
 
-  // Plane of the two largest principal axes of the reference path.
-  Eigen::Vector3d mean = Eigen::Vector3d::Zero();
-  for (const auto& c : reference->centres) mean += c;
-  mean /= static_cast<double>(reference->centres.size());
-  Eigen::Matrix3d covariance = Eigen::Matrix3d::Zero();
-  for (const auto& c : reference->centres) covariance += (c - mean) * (c - mean).transpose();
-  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eigen(covariance);
-  const Eigen::Vector3d axis_u = eigen.eigenvectors().col(2);
-  const Eigen::Vector3d axis_v = eigen.eigenvectors().col(1);
-  auto project = [&](const Eigen::Vector3d& x) {
-    return Eigen::Vector2d((x - mean).dot(axis_u), (x - mean).dot(axis_v));
-  };
+  const TopViewPlane plane = FitTopViewPlane(reference->centres);
+  auto project = [&](const Eigen::Vector3d& x) { return plane.Project(x); };
 
   Eigen::Vector2d lo = Eigen::Vector2d::Constant(std::numeric_limits<double>::max());
   Eigen::Vector2d hi = -lo;

@@ -16,6 +16,21 @@
 
 namespace loopsfm {
 
+// The plane seen from above: the two largest principal axes of a set of camera centres
+// through their mean (the ground plane of a walk or a drive).
+struct TopViewPlane {
+  Eigen::Vector3d mean = Eigen::Vector3d::Zero();
+  Eigen::Vector3d axis_u = Eigen::Vector3d::UnitX();
+  Eigen::Vector3d axis_v = Eigen::Vector3d::UnitY();
+  // Coordinates of x along the two axes, relative to the mean.
+  Eigen::Vector2d Project(const Eigen::Vector3d& x) const {
+    return {(x - mean).dot(axis_u), (x - mean).dot(axis_v)};
+  }
+};
+
+// The plane of `centres` (at least one).
+TopViewPlane FitTopViewPlane(const std::vector<Eigen::Vector3d>& centres);
+
 struct TopViewPath {
   std::string label;
   std::vector<Eigen::Vector3d> centres;  // in order, in one world frame for all paths

@@ -76,15 +76,18 @@ export function topViewChart(parent, topView) {
   const paths = topView.paths.filter((p) => Array.isArray(p.xy) && p.xy.length > 0);
   const canvas = chartBox(parent, 'chart-top-view');
   let colour = 0;
-  const datasets = paths.map((p) => {
-    const c = /ground truth/i.test(p.label || '') ? kGroundTruthColour : kPalette[colour++ % kPalette.length];
+  const datasets = paths.map((p, k) => {
+    // The ground truth wide and beneath the estimates, which are drawn over it in order.
+    const truth = /ground truth/i.test(p.label || '');
+    const c = truth ? kGroundTruthColour : kPalette[colour++ % kPalette.length];
     return {
       label: p.label || 'path',
       data: p.xy.map(([x, y]) => ({ x, y })),
+      order: truth ? paths.length : k,
       showLine: true,
       borderColor: c,
       backgroundColor: c,
-      borderWidth: 2,
+      borderWidth: truth ? 4 : 1.5,
       pointRadius: 0,
       pointHitRadius: 4,
     };
@@ -97,7 +100,8 @@ export function topViewChart(parent, topView) {
     data: { datasets },
     options: {
       scales: { x: axis(topView.x_label), y: axis(topView.y_label) },
-      plugins: { legend: { position: 'top' } },
+      // Legend in the data's order (`order` above only sets the drawing order).
+      plugins: { legend: { position: 'top', labels: { sort: (a, b) => a.datasetIndex - b.datasetIndex } } },
     },
   });
   // Equal scales need the chart area's size, known after the first layout; the tick labels
