@@ -397,6 +397,21 @@ TEST_F(CliBadInputTest, BadFlagValues) {
       << "a bad flag must be refused before the output is created";
 }
 
+TEST_F(CliBadInputTest, CommonFlagsWorkAfterTheSubcommand) {
+  // -q after the subcommand silences the info log as it does before it.
+  const fs::path scene = dir() / "scene";
+  const CommandResult loud = RunLoopsfm({"synth", "cylinder", "-o", (dir() / "loud").string(),
+                                         "--frames", "2", "--width", "64", "--height", "48"});
+  ASSERT_EQ(loud.exit_code, 0) << loud;
+  EXPECT_NE(loud.output.find("[info]"), std::string::npos) << loud;
+  const CommandResult quiet =
+      RunLoopsfm({"synth", "cylinder", "-o", scene.string(), "--frames", "2", "--width", "64",
+                  "--height", "48", "-q", "--threads", "1"});
+  ASSERT_EQ(quiet.exit_code, 0) << quiet;
+  EXPECT_EQ(quiet.output.find("[info]"), std::string::npos) << quiet;
+  EXPECT_TRUE(fs::exists(scene / "groundtruth.txt"));
+}
+
 TEST_F(CliBadInputTest, MalformedIntrinsicsFileNamesFileAndLine) {
   struct Case {
     std::string name, text;

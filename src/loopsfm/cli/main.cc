@@ -12,6 +12,8 @@ int main(int argc, char** argv) {
   using namespace loopsfm;
   CLI::App app{"loopsfm: camera poses and a sparse point cloud from video, with loop closing"};
   app.require_subcommand(1);
+  // --threads, -v and -q work after the subcommand too (`loopsfm reconstruct ... -q`).
+  app.fallthrough();
   app.set_version_flag("--version", "loopsfm 0.1.0");
   auto& common = cli::Common();
   app.add_option("--threads", common.threads, "Worker threads (0: all cores)")->capture_default_str();
