@@ -27,8 +27,10 @@ if (!fs.existsSync(executablePath)) {
   process.exit(77);
 }
 
-// WebGL without a GPU: ANGLE on SwiftShader, which Chromium only allows when asked.
-const kChromiumArgs = ['--use-angle=swiftshader', '--enable-unsafe-swiftshader', '--disable-gpu-sandbox'];
+// WebGL without a GPU: ANGLE on SwiftShader, which Chromium only allows when asked. Without
+// these, Chromium 156 picks another software GL that warns "GPU stall due to ReadPixels" on
+// every screenshot.
+const kChromiumArgs = ['--use-angle=swiftshader', '--enable-unsafe-swiftshader'];
 // Least share of non-background pixels in each region (the drawings cover far more).
 const kMinShare = { canvas3d: 0.01, topView: 0.01, perFrame: 0.01, stages: 0.01 };
 
@@ -139,6 +141,28 @@ try {
   fs.mkdirSync(path.dirname(path.resolve(screenshotPath)), { recursive: true });
   fs.writeFileSync(screenshotPath, PNG.sync.write(png));
   console.log(`screenshot: ${screenshotPath}`);
+
+  // The same report with most of its data left out (no poses, points, plots or timings):
+  // the sections without data are omitted, and nothing breaks.
+  await page.addInitScript(() => {
+    let data;
+    Object.defineProperty(window, 'LOOPSFM_REPORT', {
+      get: () => data,
+      set: (full) => {
+        data = { title: full.title, frames: full.frames.map((f) => ({ index: f.index, registered: false })) };
+      },
+    });
+  });
+  await page.reload();
+  await page.waitForFunction(() => window.loopsfmReport && window.loopsfmReport.ready, null, { timeout: 30000 });
+  const sparse = await page.evaluate(() => ({
+    regions: window.loopsfmReport.regions(),
+    sections: [...document.querySelectorAll('section')].map((s) => s.id),
+  }));
+  console.log(`with little data: sections ${sparse.sections.join(', ')}`);
+  if (sparse.sections.join(',') !== 'summary,per-frame' || sparse.regions.canvas3d || !sparse.regions.perFrame) {
+    fail(`with little data, want the sections summary and per-frame only, got ${sparse.sections.join(', ')}`);
+  }
 } finally {
   await browser.close();
 }
