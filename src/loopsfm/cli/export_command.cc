@@ -30,6 +30,7 @@ void AddExportCommand(CLI::App& app) {
   cmd->callback([flags] {
     ExportOptions options;
     options.formats = ParseExportFormats(flags->formats);
+    if (flags->formats == "all") options.formats.erase(ExportFormat::kReport);
     options.write_text = flags->text;
     std::optional<std::filesystem::path> input;
     if (!flags->input.empty()) input = flags->input;

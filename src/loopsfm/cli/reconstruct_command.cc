@@ -1,3 +1,5 @@
+#include <map>
+
 #include <fmt/format.h>
 
 #include "loopsfm/cli/commands.h"
@@ -71,6 +73,12 @@ void PrintSummary(const ReconstructReport& report) {
                      "for drift\n",
                      "  loop closing", m.seconds_loop_detection, m.loops_closed.size(),
                      m.seconds_loop_closing, m.num_loops_refused);
+  if (m.num_split_pairs > 0 || m.num_split_groups_refused > 0 || m.seconds_split > 0.0) {
+    out += fmt::format("{:<28}{} pairs tied in {} groups, {} groups refused as too large for "
+                       "drift, {:.1f} s\n",
+                       "  split tracks", m.num_split_pairs, m.num_split_groups,
+                       m.num_split_groups_refused, m.seconds_split);
+  }
   for (const ClosedLoop& loop : m.loops_closed) {
     out += fmt::format("{:<28}{} -> {}: {} of {} point pairs agree, recent end moved {:.3g} "
                        "({:.2f} % of the path between), {:.2f} deg, scale {:.4f}; {:.1f} s\n",
@@ -93,6 +101,7 @@ void AddReconstructCommand(CLI::App& app) {
     MatchFlags match;
     bool text = false;
     std::string export_formats = "default";
+    std::string groundtruth;
     bool no_self_calibration = false;
     std::string refine;
     std::string loop_closing = "posegraph";
@@ -114,6 +123,10 @@ void AddReconstructCommand(CLI::App& app) {
                   std::string("What to write after mapping: ") + kExportFormatsHelp +
                       "; or all, none, default (all but gsplat)")
       ->capture_default_str();
+  cmd->add_option("--groundtruth", flags->groundtruth,
+                  "Ground truth trajectory ('name tx ty tz qx qy qz qw' per line, "
+                  "camera-to-world): the report aligns the path to it and shows its errors")
+      ->check(CLI::ExistingFile);
   cmd->add_option("--refine", flags->refine,
                   "Intrinsics that global bundle adjustment refines, for every camera: any of "
                   "focal,principal-point,distortion or none (default: focal,distortion without "
@@ -123,8 +136,10 @@ void AddReconstructCommand(CLI::App& app) {
                 "image size) instead of estimating it from the pairs' fundamental matrices");
   cmd->add_option("--loop-closing", flags->loop_closing,
                   "posegraph: when the camera returns after drift, correct the map while mapping "
-                  "(Sim3 pose graph, then the two ends' points are fused) | none: map without "
-                  "loop closing")
+                  "(Sim3 pose graph, then the two ends' points are fused) | split: after "
+                  "mapping, tie the two ends of split tracks together in a bundle adjustment "
+                  "(depth-normalised point constraints) | both: posegraph, then split | none: "
+                  "map without loop closing")
       ->capture_default_str();
   cmd->add_flag("--withhold-loop-pairs", flags->withhold_loop_pairs,
                 "Evaluation: map without the pairs between frames 50 or more apart, then add "
@@ -139,16 +154,23 @@ void AddReconstructCommand(CLI::App& app) {
       options.mapper.refine_known = options.mapper.refine_unknown =
           IntrinsicsRefinement::Parse(flags->refine);
     }
-    if (flags->loop_closing != "posegraph" && flags->loop_closing != "none") {
-      throw InvalidArgument(fmt::format(
-          "--loop-closing '{}' is not a method; use posegraph (the default) or none",
-          flags->loop_closing));
+    const std::map<std::string, LoopClosingMethod> methods = {
+        {"none", LoopClosingMethod::kNone},
+        {"posegraph", LoopClosingMethod::kPoseGraph},
+        {"split", LoopClosingMethod::kSplit},
+        {"both", LoopClosingMethod::kBoth}};
+    const auto method = methods.find(flags->loop_closing);
+    if (method == methods.end()) {
+      throw InvalidArgument(fmt::format("--loop-closing '{}' is not a method; use posegraph (the "
+                                        "default), split, both or none",
+                                        flags->loop_closing));
     }
-    options.mapper.loop_closure.enabled = flags->loop_closing == "posegraph";
+    options.mapper.loop_closure.method = method->second;
     options.mapper.loop_closure.withhold_loop_pairs = flags->withhold_loop_pairs;
     options.self_calibrate = !flags->no_self_calibration;
     options.output.formats = ParseExportFormats(flags->export_formats);
     options.output.write_text = flags->text;
+    options.groundtruth = flags->groundtruth;
     options.show_progress = !Common().quiet;
     const ReconstructReport report = Reconstruct(flags->input, flags->output, options);
     PrintSummary(report);

@@ -34,6 +34,7 @@ void AddMatchFlags(CLI::App* cmd, MatchFlags* flags);
 // What each export format writes, for the help of `reconstruct --export` and `export --format`.
 inline constexpr const char* kExportFormatsHelp =
     "any of colmap (sparse/<k>), ply (points.ply), tum (trajectory.txt), images (images/: the "
-    "frames), nerfstudio (transforms.json), gsplat (undistorted/: PINHOLE images and model)";
+    "frames), nerfstudio (transforms.json), gsplat (undistorted/: PINHOLE images and model), report "
+    "(report.html, reconstruct only)";
 
 }  // namespace loopsfm::cli

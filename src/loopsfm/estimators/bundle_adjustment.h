@@ -177,6 +177,7 @@ class BundleAdjuster {
   // Builds the problem: reprojection residuals, manifolds and constant blocks. Call at most
   // once; Solve calls it when it has not been called.
   void SetUp(Reconstruction* reconstruction);
+  bool IsSetUp() const { return problem_ != nullptr; }
 
   // Runs the solver and writes the result into the reconstruction (normalised quaternions).
   // Returns report().success.

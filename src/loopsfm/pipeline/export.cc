@@ -27,6 +27,7 @@ constexpr std::pair<ExportFormat, std::string_view> kFormatNames[] = {
     {ExportFormat::kColmap, "colmap"},         {ExportFormat::kPly, "ply"},
     {ExportFormat::kTum, "tum"},               {ExportFormat::kImages, "images"},
     {ExportFormat::kNerfstudio, "nerfstudio"}, {ExportFormat::kGsplat, "gsplat"},
+    {ExportFormat::kReport, "report"},
 };
 
 void CreateFolder(const fs::path& dir) {
@@ -320,6 +321,11 @@ ExportReport Export(std::vector<Reconstruction>* models, const std::vector<std::
 
 ExportReport ExportRun(const fs::path& output_dir, const std::optional<fs::path>& frames_source,
                        const ExportOptions& options) {
+  if (options.formats.count(ExportFormat::kReport)) {
+    throw InvalidArgument("report.html is written by `loopsfm reconstruct` (it shows the run's "
+                          "timings): run it again with --export ...,report (finished stages are "
+                          "reused)");
+  }
   std::vector<Reconstruction> models;
   for (int m = 0; fs::is_directory(output_dir / "sparse" / std::to_string(m)); ++m) {
     models.push_back(ReadColmapModel(output_dir / "sparse" / std::to_string(m)));

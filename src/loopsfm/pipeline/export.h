@@ -8,6 +8,8 @@
 //   nerfstudio  OUT/transforms.json for model 0, pointing at images/ and points.ply
 //   gsplat      OUT/undistorted/{images,sparse/0}: model 0 undistorted to PINHOLE, the layout
 //               the Gaussian-splatting convert.py leaves (COLMAP's image_undistorter)
+//   report      OUT/report.html: written by Reconstruct (run_report.h), which holds the run's
+//               timings; Export itself skips it
 // Folders that are replaced (sparse/, images/, undistorted/) are written beside the old ones
 // and swapped in when complete, so an interrupted export never leaves a mix or loses the old.
 
@@ -23,7 +25,7 @@
 
 namespace loopsfm {
 
-enum class ExportFormat { kColmap, kPly, kTum, kImages, kNerfstudio, kGsplat };
+enum class ExportFormat { kColmap, kPly, kTum, kImages, kNerfstudio, kGsplat, kReport };
 
 std::string_view ExportFormatName(ExportFormat format);
 // Every format but gsplat (which writes every registered frame a second time).
@@ -73,7 +75,8 @@ ExportReport Export(std::vector<Reconstruction>* models, const std::vector<std::
 // Exports an earlier run again from what OUT holds (OUT/sparse/<k>, OUT/database.db), without
 // recomputing anything. Frames are read from `frames_source` when given, else from OUT/images
 // when it holds them, else from the video or folder the run was made from. Throws InputError
-// when OUT holds no model, or a format needs frames and none of these has them.
+// when OUT holds no model, or a format needs frames and none of these has them, and
+// InvalidArgument for the report (it needs the run itself).
 ExportReport ExportRun(const std::filesystem::path& output_dir,
                        const std::optional<std::filesystem::path>& frames_source,
                        const ExportOptions& options);

@@ -3,6 +3,8 @@
 #include <unordered_map>
 
 #include "loopsfm/eval/trajectory_metrics.h"
+#include "loopsfm/pipeline/run_report.h"
+#include "loopsfm/report/html_report.h"
 #include "loopsfm/scene/dataset_files.h"
 #include "loopsfm/storage/colmap_model.h"
 #include "loopsfm/storage/ply.h"
@@ -56,6 +58,8 @@ ReconstructReport Reconstruct(const fs::path& input, const fs::path& output_dir,
   ReconstructReport report;
   // Refuse a bad input before anything is created.
   OpenFrameSource(input);
+  std::optional<std::vector<TrajectoryEntry>> groundtruth;
+  if (!options.groundtruth.empty()) groundtruth = ReadTrajectoryFile(options.groundtruth);
   std::error_code ec;
   fs::create_directories(output_dir, ec);
   if (ec || !fs::is_directory(output_dir)) {
@@ -113,6 +117,15 @@ ReconstructReport Reconstruct(const fs::path& input, const fs::path& output_dir,
   report.stage_times.push_back({"export", stage.ElapsedSeconds()});
   report.total_seconds = total.ElapsedSeconds();
   report.peak_memory_bytes = PeakResidentBytes();
+  if (options.output.formats.count(ExportFormat::kReport)) {
+    stage.Restart();
+    WriteHtmlReport(output_dir / "report.html",
+                    RunReportData(report, models, FramesInCaptureOrder(database), input,
+                                  output_dir, groundtruth));
+    report.output.written.push_back(output_dir / "report.html");
+    report.stage_times.push_back({"report", stage.ElapsedSeconds()});
+    report.total_seconds = total.ElapsedSeconds();
+  }
   return report;
 }
 

@@ -28,6 +28,8 @@ struct ReconstructOptions {
   IncrementalMapperOptions mapper;
   // What is written after mapping.
   ExportOptions output;
+  // Ground truth (trajectory file) to score the path against in the report; empty: none.
+  std::filesystem::path groundtruth;
   // Show progress on stderr.
   bool show_progress = true;
   void Check() const;

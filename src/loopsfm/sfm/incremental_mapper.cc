@@ -7,6 +7,7 @@
 
 #include "loopsfm/sfm/initial_pair.h"
 #include "loopsfm/sfm/loop_closure.h"
+#include "loopsfm/sfm/track_split.h"
 #include "loopsfm/sfm/mapper_state.h"
 #include "loopsfm/sfm/model_merger.h"
 #include "loopsfm/util/errors.h"
@@ -121,6 +122,10 @@ class IncrementalMapper {
     std::sort(models_.begin(), models_.end(), [](const ModelPtr& a, const ModelPtr& b) {
       return a->reconstruction().NumRegImages() > b->reconstruction().NumRegImages();
     });
+    if (options_.loop_closure.SplitTracks() && !models_.empty()) {
+      Random split_random(options_.seed + 2);
+      CloseLoopsBySplitTracks(*models_[0], options_.loop_closure, split_random, &report_);
+    }
     std::vector<Reconstruction> result;
     for (ModelPtr& model : models_) {
       model->reconstruction().UpdateReprojectionErrors();
@@ -247,7 +252,7 @@ class IncrementalMapper {
         ++report_.num_registered;
         failed_at.erase(image_id);
         if (ever_failed.erase(image_id)) ++report_.num_registered_on_retry;
-        if (options_.loop_closure.enabled &&
+        if (options_.loop_closure.CloseWhileMapping() &&
             loop_closer_.AfterRegistration(*model, image_id, &report_)) {
           // Closing ended with a global refinement.
           last_global_size = rec.NumRegImages();
@@ -329,6 +334,7 @@ std::vector<Reconstruction> RunIncrementalMapper(const MapperInput& input,
                withheld.tracks.size());
   IncrementalMapperOptions mapping = options;
   mapping.loop_closure.withhold_loop_pairs = false;
+  mapping.loop_closure.method = LoopClosingMethod::kNone;  // no loop pairs to close yet
   IncrementalMapper mapper(withheld, mapping, out, progress);
   std::vector<Reconstruction> models = mapper.Run();
   if (!models.empty()) models[0] = CloseLoopsAfterMapping(input, models[0], options, out);

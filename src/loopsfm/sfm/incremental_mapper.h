@@ -21,6 +21,7 @@
 #include <vector>
 
 #include "loopsfm/math/random.h"
+#include "loopsfm/scene/dataset_files.h"
 #include "loopsfm/scene/reconstruction.h"
 #include "loopsfm/sfm/mapper_input.h"
 
@@ -39,10 +40,20 @@ struct IntrinsicsRefinement {
   std::string ToString() const;
 };
 
-// Loop closing while mapping (loop_closure.h).
+// How loops are closed: none maps exactly as without loop closing; posegraph corrects the
+// map while mapping (loop_closure.h); split ties the disagreeing points of split tracks
+// together in a bundle adjustment after mapping (track_split.h); both does the two.
+enum class LoopClosingMethod { kNone, kPoseGraph, kSplit, kBoth };
+
+// Loop closing (loop_closure.h, track_split.h).
 struct LoopClosureOptions {
-  // Close loops while mapping; false maps exactly as without loop closing.
-  bool enabled = true;
+  LoopClosingMethod method = LoopClosingMethod::kPoseGraph;
+  bool CloseWhileMapping() const {
+    return method == LoopClosingMethod::kPoseGraph || method == LoopClosingMethod::kBoth;
+  }
+  bool SplitTracks() const {
+    return method == LoopClosingMethod::kSplit || method == LoopClosingMethod::kBoth;
+  }
   // Evaluation: map without the pairs between frames min_frame_gap or more apart, then add
   // them and close the loops of the largest model at the end (CloseLoopsAfterMapping), as if
   // they had been found late. Drift then grows unchecked until the end, which shows what
@@ -69,6 +80,9 @@ struct LoopClosureOptions {
   // edge weighs this much more than the others.
   int covisibility_min_points = 20;
   double loop_edge_weight = 100.0;
+  // Split tracks: weight of a pair's coincidence term against a reprojection error, per
+  // pixel of the pair's separation seen from its observers (distance / depth * focal).
+  double split_weight = 10.0;
   void Check() const;
 };
 
@@ -175,6 +189,16 @@ struct MapperReport {
   // Looking for loop evidence after each registration, and correcting the loops found.
   double seconds_loop_detection = 0.0;
   double seconds_loop_closing = 0.0;
+  // Track splitting after mapping: groups of split pairs (one per stretch of a loop) that
+  // one similarity explains and that were tied together, those refused as implausible, the
+  // pairs tied, and the time taken (finding them and the bundle adjustments).
+  // The camera path (registered frames in capture order, world_from_cam) just before the
+  // first loop correction (pose graph or split tracks), for before / after plots.
+  std::vector<TrajectoryEntry> path_before_loop_closing;
+  int num_split_groups = 0;
+  int num_split_groups_refused = 0;
+  int num_split_pairs = 0;
+  double seconds_split = 0.0;
 };
 
 // Called after each registration with (registered in this model, frames in all).

@@ -6,6 +6,7 @@
 
 #include "loopsfm/estimators/pose_graph.h"
 #include "loopsfm/sfm/mapper_state.h"
+#include "loopsfm/sfm/track_split.h"
 #include "loopsfm/tracks/track_builder.h"
 #include "loopsfm/util/errors.h"
 #include "loopsfm/util/logging.h"
@@ -28,6 +29,7 @@ void LoopClosureOptions::Check() const {
   LOOPSFM_REQUIRE_OPTION(max_correction_scale >= 1.0, "loop: scale bound must be at least 1");
   LOOPSFM_REQUIRE_OPTION(covisibility_min_points >= 1, "loop: co-visibility needs a point");
   LOOPSFM_REQUIRE_OPTION(loop_edge_weight > 0, "loop: edge weight must be positive");
+  LOOPSFM_REQUIRE_OPTION(split_weight > 0, "loop: split weight must be positive");
 }
 
 MapperInput WithoutLoopPairs(const MapperInput& input, int min_frame_gap) {
@@ -72,11 +74,19 @@ Reconstruction CloseLoopsAfterMapping(const MapperInput& input, const Reconstruc
   for (image_t id : ordered) state.TriangulateImage(id);
   const double seconds_triangulation = timer.ElapsedSeconds();
   report->seconds_triangulation += seconds_triangulation;
-  if (options.loop_closure.enabled) {
-    LoopCloser closer(input, options.loop_closure, options.seed + 1, /*refine=*/false);
+  const LoopClosureOptions& loop = options.loop_closure;
+  if (loop.CloseWhileMapping()) {
+    LoopCloser closer(input, loop, options.seed + 1, /*refine=*/false);
     for (image_t id : ordered) closer.AfterRegistration(state, id, report);
   }
-  state.GlobalRefinement(report);
+  // Split tracks start from a refined map after the pose graph, from the map as triangulated
+  // without it; their pass ends with a bundle of its own.
+  if (!loop.SplitTracks() || loop.CloseWhileMapping()) state.GlobalRefinement(report);
+  if (loop.SplitTracks()) {
+    Random split_random(options.seed + 2);
+    const int tied = CloseLoopsBySplitTracks(state, loop, split_random, report);
+    if (tied == 0 && !loop.CloseWhileMapping()) state.GlobalRefinement(report);
+  }
   spdlog::info("loop pairs added after mapping: {} loops closed, {:.1f} s",
                report->loops_closed.size(), timer.ElapsedSeconds());
   return rec;
@@ -138,16 +148,41 @@ LoopCloser::Evidence LoopCloser::CollectEvidence(const MapperState& model,
   return evidence;
 }
 
-double LoopCloser::PathLength(const Reconstruction& rec, int first, int last) const {
-  double length = 0.0;
+void KeepPathBeforeLoopClosing(const MapperInput& input, const Reconstruction& reconstruction,
+                               MapperReport* report) {
+  if (!report->path_before_loop_closing.empty()) return;
+  for (const MapperFrame& frame : input.frames) {
+    if (!reconstruction.ExistsImage(frame.image_id)) continue;
+    const Image& image = reconstruction.GetImage(frame.image_id);
+    if (image.registered) {
+      report->path_before_loop_closing.push_back({image.name, image.cam_from_world.Inverse()});
+    }
+  }
+}
+
+DriftCorrection MeasureCorrection(const Reconstruction& reconstruction, const MapperInput& input,
+                                  const Sim3d& old_from_recent, image_t recent_frame,
+                                  int old_index, int recent_index,
+                                  const LoopClosureOptions& options) {
+  double path = 0.0;
   const Image* previous = nullptr;
-  for (int k = std::max(first, 0); k <= last && k < static_cast<int>(input_.frames.size()); ++k) {
-    const Image& image = rec.GetImage(input_.frames[k].image_id);
+  for (int k = std::max(old_index, 0);
+       k <= recent_index && k < static_cast<int>(input.frames.size()); ++k) {
+    const Image& image = reconstruction.GetImage(input.frames[k].image_id);
     if (!image.registered) continue;
-    if (previous) length += (image.ProjectionCenter() - previous->ProjectionCenter()).norm();
+    if (previous) path += (image.ProjectionCenter() - previous->ProjectionCenter()).norm();
     previous = &image;
   }
-  return length;
+  DriftCorrection correction;
+  const Eigen::Vector3d centre = reconstruction.GetImage(recent_frame).ProjectionCenter();
+  correction.translation = (old_from_recent * centre - centre).norm();
+  correction.fraction_of_path =
+      path > 0.0 ? correction.translation / path : std::numeric_limits<double>::infinity();
+  correction.scale = old_from_recent.scale;
+  correction.plausible =
+      correction.fraction_of_path <= options.max_correction_fraction_of_path &&
+      std::max(correction.scale, 1.0 / correction.scale) <= options.max_correction_scale;
+  return correction;
 }
 
 bool LoopCloser::AfterRegistration(MapperState& model, image_t image_id, MapperReport* report) {
@@ -205,8 +240,6 @@ bool LoopCloser::DetectAndClose(MapperState& model, image_t image_id, MapperRepo
   // Plausible as drift?
   const Reconstruction& rec = model.reconstruction();
   const Sim3d& old_from_recent = alignment.dst_from_src;
-  const Eigen::Vector3d centre = rec.GetImage(image_id).ProjectionCenter();
-  const double translation = (old_from_recent * centre - centre).norm();
   std::vector<int> old_indices;
   for (size_t k = 0; k < all.size(); ++k) {
     if (alignment.inlier_mask[k]) old_indices.push_back(frame_index_.at(all[k].dst_obs.image->image_id));
@@ -214,11 +247,12 @@ bool LoopCloser::DetectAndClose(MapperState& model, image_t image_id, MapperRepo
   std::nth_element(old_indices.begin(), old_indices.begin() + old_indices.size() / 2,
                    old_indices.end());
   const int old_index = old_indices[old_indices.size() / 2];
-  const double path = PathLength(rec, old_index, frame_index_.at(image_id));
-  const double fraction = path > 0.0 ? translation / path : std::numeric_limits<double>::infinity();
-  const double scale = old_from_recent.scale;
-  if (fraction > options_.max_correction_fraction_of_path ||
-      std::max(scale, 1.0 / scale) > options_.max_correction_scale) {
+  const DriftCorrection correction = MeasureCorrection(
+      rec, input_, old_from_recent, image_id, old_index, frame_index_.at(image_id), options_);
+  const double translation = correction.translation;
+  const double fraction = correction.fraction_of_path;
+  const double scale = correction.scale;
+  if (!correction.plausible) {
     ++report->num_loops_refused;
     spdlog::info("loop: refused {} -> {} ({} inliers): a correction of {:.3g} ({:.1f} % of the "
                  "path between them), scale {:.3f}, is too large for drift",
@@ -292,6 +326,7 @@ void LoopCloser::Close(MapperState& model, const Sim3d& old_from_recent,
                        const std::vector<std::pair<image_t, image_t>>& loop_edges,
                        MapperReport* report) {
   Reconstruction& rec = model.reconstruction();
+  KeepPathBeforeLoopClosing(input_, rec, report);
   PoseGraph graph;
   std::vector<image_t> ordered;  // registered frames in capture order
   for (const MapperFrame& frame : input_.frames) {

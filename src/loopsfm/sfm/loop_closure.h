@@ -48,6 +48,26 @@ Reconstruction CloseLoopsAfterMapping(const MapperInput& input, const Reconstruc
                                       const IncrementalMapperOptions& options,
                                       MapperReport* report);
 
+// What a similarity old_from_recent asks of the recent end of a loop: how far it moves the
+// centre of `recent_frame`, also as a fraction of the path walked (registered frames in
+// capture order) between capture indices old_index and recent_index, and its scale; and
+// whether that is plausible as drift under the options' bounds.
+struct DriftCorrection {
+  double translation = 0.0;
+  double fraction_of_path = 0.0;
+  double scale = 1.0;
+  bool plausible = false;
+};
+DriftCorrection MeasureCorrection(const Reconstruction& reconstruction, const MapperInput& input,
+                                  const Sim3d& old_from_recent, image_t recent_frame,
+                                  int old_index, int recent_index,
+                                  const LoopClosureOptions& options);
+
+// Keeps the path of `reconstruction` in report->path_before_loop_closing unless a path is
+// kept there already (the first correction's "before").
+void KeepPathBeforeLoopClosing(const MapperInput& input, const Reconstruction& reconstruction,
+                               MapperReport* report);
+
 class LoopCloser {
  public:
   // refine: after each correction, a global refinement (bundle, re-triangulation, merging,
@@ -72,8 +92,6 @@ class LoopCloser {
 
   bool DetectAndClose(MapperState& model, image_t image_id, MapperReport* report);
   Evidence CollectEvidence(const MapperState& model, image_t image_id) const;
-  // Path length along the registered frames in capture order between two capture indices.
-  double PathLength(const Reconstruction& rec, int first, int last) const;
   void Close(MapperState& model, const Sim3d& old_from_recent,
              const std::vector<std::pair<image_t, image_t>>& loop_edges, MapperReport* report);
 

@@ -3,43 +3,15 @@
 #include <gtest/gtest.h>
 
 #include "loopsfm/sfm/mapper_state.h"
-#include "loopsfm/sfm/sfm_test_problem.h"
+#include "loopsfm/sfm/loop_test_problem.h"
 #include "loopsfm/util/errors.h"
 
 namespace loopsfm {
 namespace {
 
-using testing::MakeMapperProblem;
 using testing::MapperProblem;
-using testing::MapperProblemOptions;
-
-// 40 frames out along a wall and 40 back beside the first ones.
-MapperProblem WalkOutAndBack() {
-  MapperProblemOptions options;
-  options.num_frames = 80;
-  options.num_points = 4000;
-  options.overlap = 6;
-  options.walk_back = true;
-  return MakeMapperProblem(options);
-}
-
-// Registers every frame in capture order at its true pose, frames of the walk back moved
-// sideways and outwards by drift that grows with each frame (`drift_per_frame` metres), as
-// an incremental mapper would have placed them; each frame's tracks are triangulated as it
-// comes, so where the walk back meets the first frames' points it makes points of its own.
-void RegisterWithDrift(const MapperProblem& p, MapperState& state, double drift_per_frame) {
-  const int half = static_cast<int>(p.input.frames.size()) / 2;
-  for (size_t i = 0; i < p.input.frames.size(); ++i) {
-    const image_t id = p.input.frames[i].image_id;
-    Rigid3d pose = p.cam_from_world[i];
-    const double drift = drift_per_frame * std::max(0, static_cast<int>(i) - half + 1);
-    pose.translation -= pose.rotation * Eigen::Vector3d(0.3 * drift, drift, 0.5 * drift);
-    state.reconstruction().GetImage(id).cam_from_world = pose;
-    state.reconstruction().RegisterImage(id);
-    state.TriangulateImage(id);
-  }
-  state.SetGauge(p.input.frames[0].image_id, p.input.frames[1].image_id);
-}
+using testing::RegisterWithDrift;
+using testing::WalkOutAndBack;
 
 IncrementalMapperOptions LoopOptions() {
   IncrementalMapperOptions options;

@@ -10,9 +10,11 @@
 // found through any of its observations, so nothing is cached that could go stale when
 // points are deleted.
 
+#include <functional>
 #include <unordered_map>
 #include <vector>
 
+#include "loopsfm/estimators/bundle_adjustment.h"
 #include "loopsfm/math/random.h"
 #include "loopsfm/scene/reconstruction.h"
 #include "loopsfm/sfm/incremental_mapper.h"
@@ -63,8 +65,11 @@ class MapperState {
   // Bundle over the image and the frames sharing most points with it, then filtering of
   // the points involved. Returns false when the solver failed (the model is unchanged).
   bool LocalBundle(image_t image_id, MapperReport* report);
-  // Bundle over all registered frames. Returns false when the solver failed.
-  bool GlobalBundle(MapperReport* report);
+  // Bundle over all registered frames, with extra terms added by `add_terms` once the
+  // problem is set up (loop closing's point constraints). Returns false when the solver
+  // failed.
+  bool GlobalBundle(MapperReport* report,
+                    const std::function<void(BundleAdjuster&)>& add_terms = {});
   // Global bundle, re-triangulation and merging of all tracks, filtering, and a second
   // bundle when those changed much.
   void GlobalRefinement(MapperReport* report);

@@ -110,7 +110,8 @@ bool MapperState::LocalBundle(image_t image_id, MapperReport* report) {
   return ok;
 }
 
-bool MapperState::GlobalBundle(MapperReport* report) {
+bool MapperState::GlobalBundle(MapperReport* report,
+                               const std::function<void(BundleAdjuster&)>& add_terms) {
   Timer timer;
   BundleAdjustmentConfig config;
   for (image_t id : reconstruction_.RegImageIds()) config.AddImage(id);
@@ -151,6 +152,10 @@ bool MapperState::GlobalBundle(MapperReport* report) {
                              options_.focal_prior_sigma_log),
           nullptr, camera.params.data());
     }
+  }
+  if (add_terms) {
+    if (!adjuster.IsSetUp()) adjuster.SetUp(&reconstruction_);
+    add_terms(adjuster);
   }
   const bool ok = ReportSolve(adjuster, &reconstruction_, "global", report);
   report->num_global_ba_iterations += adjuster.report().num_iterations;

@@ -1,0 +1,126 @@
+#include "loopsfm/pipeline/run_report.h"
+
+#include <chrono>
+
+#include <fmt/chrono.h>
+#include <fmt/format.h>
+
+#include "loopsfm/eval/trajectory_metrics.h"
+#include "loopsfm/report/report_data.h"
+#include "loopsfm/report/top_view.h"
+
+namespace loopsfm {
+namespace fs = std::filesystem;
+namespace {
+
+std::vector<Eigen::Vector3d> Centres(const std::vector<TrajectoryEntry>& path) {
+  std::vector<Eigen::Vector3d> centres;
+  for (const TrajectoryEntry& e : path) centres.push_back(e.world_from_cam.translation);
+  return centres;
+}
+
+// Centres of `path` aligned to the ground truth (a similarity of its own), in ground-truth
+// order; empty when it cannot be aligned.
+std::vector<Eigen::Vector3d> AlignedCentres(const TrajectoryMetrics& metrics) {
+  std::vector<Eigen::Vector3d> centres;
+  if (!metrics.aligned) return centres;
+  for (const FrameError& f : metrics.frames) centres.push_back(f.aligned_centre);
+  return centres;
+}
+
+nlohmann::json TopView(const std::vector<TrajectoryEntry>& path,
+                       const std::vector<TrajectoryEntry>& before,
+                       const std::optional<std::vector<TrajectoryEntry>>& groundtruth,
+                       nlohmann::json* evaluation) {
+  std::vector<std::pair<std::string, std::vector<Eigen::Vector3d>>> paths;
+  if (groundtruth) {
+    const TrajectoryMetrics metrics = EvaluateTrajectory(path, *groundtruth);
+    paths.push_back({"ground truth", Centres(*groundtruth)});
+    paths.push_back({"loopsfm", AlignedCentres(metrics)});
+    if (!before.empty()) {
+      paths.push_back({"before loop closing", AlignedCentres(EvaluateTrajectory(before, *groundtruth))});
+    }
+    if (metrics.aligned) {
+      *evaluation = {{"ate_fraction_of_path", metrics.ate_fraction_of_path},
+                     {"ate_rmse", metrics.ate_rmse},
+                     {"rotation_error_mean_deg", metrics.rotation_error_mean_deg}};
+      if (metrics.loop_gaps && metrics.loop_gaps->num_revisits > 0) {
+        (*evaluation)["loop_gap_max"] = metrics.loop_gaps->max;
+        (*evaluation)["loop_gap_mean"] = metrics.loop_gaps->mean;
+      }
+    } else {
+      *evaluation = {{"explanation", metrics.explanation}};
+    }
+  } else {
+    paths.push_back({"loopsfm", Centres(path)});
+    if (!before.empty()) paths.push_back({"before loop closing", Centres(before)});
+  }
+  if (paths[0].second.empty()) return nullptr;
+  const TopViewPlane plane = FitTopViewPlane(paths[0].second);
+  nlohmann::json view = {{"x_label", "first principal axis"},
+                         {"y_label", "second principal axis"},
+                         {"paths", nlohmann::json::array()}};
+  for (const auto& [label, centres] : paths) {
+    if (!centres.empty()) view["paths"].push_back(ReportTopViewPath(label, centres, plane));
+  }
+  return view;
+}
+
+}  // namespace
+
+nlohmann::json RunReportData(const ReconstructReport& report,
+                             const std::vector<Reconstruction>& models,
+                             const std::vector<Frame>& frames, const fs::path& input,
+                             const fs::path& output_dir,
+                             const std::optional<std::vector<TrajectoryEntry>>& groundtruth) {
+  nlohmann::json data;
+  data["title"] = fmt::format("loopsfm: {}", input.filename().string());
+  data["input"] = fs::absolute(input).lexically_normal().string();
+  data["output"] = fs::absolute(output_dir).lexically_normal().string();
+  data["created"] = fmt::format("{:%Y-%m-%dT%H:%M:%SZ}", fmt::gmtime(std::time(nullptr)));
+  size_t registered = 0;
+  for (const Reconstruction& model : models) registered += model.NumRegImages();
+  data["summary"] = {{"frames", report.num_frames},
+                     {"registered", registered},
+                     {"models", models.size()},
+                     {"total_seconds", report.total_seconds},
+                     {"peak_memory_mib", report.peak_memory_bytes / 1048576.0}};
+  if (!report.output.models.empty()) {
+    const ModelSummary& first = report.output.models[0];
+    data["summary"]["points"] = first.num_points;
+    data["summary"]["mean_track_length"] = first.mean_track_length;
+    data["summary"]["reprojection_error_px"] = first.mean_reprojection_error;
+  }
+  data["stages"] = nlohmann::json::array();
+  for (const StageTime& t : report.stage_times) {
+    data["stages"].push_back({{"name", t.stage}, {"seconds", t.seconds}});
+  }
+  data["frames"] = ReportFrames(frames, models);
+  data["matrices"] = nlohmann::json::array();
+  for (const auto& [title, file] :
+       {std::pair{"Similarity (vocabulary tree)", "database_similarity.png"},
+        std::pair{"Verified matches", "database_matches.png"}}) {
+    if (fs::exists(output_dir / file)) data["matrices"].push_back(ReportImage(title, output_dir / file));
+  }
+  data["loops"] = nlohmann::json::array();
+  for (const ClosedLoop& loop : report.mapper.loops_closed) {
+    data["loops"].push_back({{"recent_frame", loop.recent_frame},
+                             {"old_frame", loop.old_frame},
+                             {"num_inliers", loop.num_inliers},
+                             {"num_correspondences", loop.num_correspondences},
+                             {"correction_translation", loop.correction_translation},
+                             {"correction_rotation_deg", loop.correction_rotation_deg},
+                             {"correction_scale", loop.correction_scale},
+                             {"seconds", loop.seconds}});
+  }
+  if (models.empty()) return data;
+  data["cameras"] = ReportCameras(models[0]);
+  data["points"] = ReportPoints(models[0]);
+  nlohmann::json evaluation;
+  data["top_view"] = TopView(TrajectoryFromReconstruction(models[0]),
+                             report.mapper.path_before_loop_closing, groundtruth, &evaluation);
+  if (!evaluation.is_null()) data["evaluation"] = evaluation;
+  return data;
+}
+
+}  // namespace loopsfm

@@ -1,0 +1,161 @@
+#include "loopsfm/sfm/track_split.h"
+
+#include <algorithm>
+#include <map>
+#include <unordered_map>
+#include <unordered_set>
+
+#include "loopsfm/estimators/cost_functions/point_distance.h"
+#include "loopsfm/sfm/loop_closure.h"
+#include "loopsfm/sfm/mapper_state.h"
+#include "loopsfm/sfm/point_alignment.h"
+#include "loopsfm/util/logging.h"
+#include "loopsfm/util/timer.h"
+
+namespace loopsfm {
+namespace {
+
+// Capture indices of a point's observers: first, median, last.
+struct Span {
+  int first = 0, median = 0, last = 0;
+};
+
+struct SplitPair {
+  point3D_t old_id = kInvalidPoint3DId, recent_id = kInvalidPoint3DId;
+  Span old_span, recent_span;
+};
+
+// Mean depth of a point in the frames observing it.
+double MeanDepth(const Reconstruction& rec, const Point3D& point) {
+  double sum = 0.0;
+  for (const TrackElement& el : point.track.elements) {
+    sum += (rec.GetImage(el.image_id).cam_from_world * point.xyz).z();
+  }
+  return sum / point.track.elements.size();
+}
+
+}  // namespace
+
+int CloseLoopsBySplitTracks(MapperState& model, const LoopClosureOptions& options, Random& random,
+                            MapperReport* report) {
+  Timer timer;
+  const MapperInput& input = model.input();
+  Reconstruction& rec = model.reconstruction();
+  std::unordered_map<image_t, int> index;
+  for (size_t i = 0; i < input.frames.size(); ++i) index[input.frames[i].image_id] = static_cast<int>(i);
+  auto span_of = [&](const Point3D& point) {
+    std::vector<int> indices;
+    for (const TrackElement& el : point.track.elements) indices.push_back(index.at(el.image_id));
+    std::sort(indices.begin(), indices.end());
+    return Span{indices.front(), indices[indices.size() / 2], indices.back()};
+  };
+
+  // Split pairs, grouped by the stretches of path their two ends lie on.
+  const int gap = options.min_frame_gap;
+  std::map<std::pair<int, int>, std::vector<SplitPair>> groups;
+  std::unordered_set<int> tracks_done;
+  for (const auto& [id, point] : rec.Points3D()) {
+    const int track = model.TrackOfPoint(id);
+    if (track < 0 || !tracks_done.insert(track).second) continue;
+    const std::vector<point3D_t> points = model.PointsOfTrack(track);
+    if (points.size() < 2) continue;
+    std::vector<Span> spans;
+    for (point3D_t p : points) spans.push_back(span_of(rec.GetPoint3D(p)));
+    for (size_t a = 0; a < points.size(); ++a) {
+      for (size_t b = 0; b < points.size(); ++b) {
+        if (a == b || spans[a].last + gap > spans[b].first) continue;
+        groups[{spans[a].median / gap, spans[b].median / gap}].push_back(
+            {points[a], points[b], spans[a], spans[b]});
+      }
+    }
+  }
+
+  std::vector<SplitPair> tied;
+  for (const auto& [key, pairs] : groups) {
+    if (static_cast<int>(pairs.size()) < options.min_num_inliers) continue;
+    std::vector<PointCorrespondence> correspondences;
+    for (const SplitPair& pair : pairs) {
+      const Point3D& recent = rec.GetPoint3D(pair.recent_id);
+      const Point3D& old = rec.GetPoint3D(pair.old_id);
+      correspondences.push_back(
+          {recent.xyz, old.xyz, FirstObservation(rec, recent), FirstObservation(rec, old)});
+    }
+    const PointAlignment alignment =
+        AlignPointSets(correspondences, options.max_reproj_error_px, 2000, random);
+    if (!alignment.success || alignment.num_inliers < options.min_num_inliers ||
+        alignment.num_inliers < options.min_inlier_ratio * pairs.size()) {
+      continue;
+    }
+    // Pairs that agree as they are merge by re-triangulation; nothing to tie.
+    const std::vector<char> as_is =
+        AlignmentInliers(correspondences, Sim3d(), options.max_reproj_error_px);
+    std::vector<int> old_medians, recent_medians;
+    int agree_as_is = 0;
+    for (size_t k = 0; k < pairs.size(); ++k) {
+      if (!alignment.inlier_mask[k]) continue;
+      agree_as_is += as_is[k];
+      old_medians.push_back(pairs[k].old_span.median);
+      recent_medians.push_back(pairs[k].recent_span.median);
+    }
+    if (agree_as_is >= 0.5 * alignment.num_inliers) continue;
+    std::nth_element(old_medians.begin(), old_medians.begin() + old_medians.size() / 2, old_medians.end());
+    std::nth_element(recent_medians.begin(), recent_medians.begin() + recent_medians.size() / 2,
+                     recent_medians.end());
+    const int old_index = old_medians[old_medians.size() / 2];
+    const int recent_index = recent_medians[recent_medians.size() / 2];
+    const image_t recent_frame = input.frames[recent_index].image_id;
+    if (!rec.IsRegistered(recent_frame)) continue;
+    const DriftCorrection correction = MeasureCorrection(
+        rec, input, alignment.dst_from_src, recent_frame, old_index, recent_index, options);
+    if (!correction.plausible) {
+      ++report->num_split_groups_refused;
+      spdlog::info("split: refused {} pairs {} -> {}: a correction of {:.3g} ({:.1f} % of the "
+                   "path between), scale {:.3f}, is too large for drift",
+                   alignment.num_inliers, input.frames[recent_index].name,
+                   input.frames[old_index].name, correction.translation,
+                   100.0 * correction.fraction_of_path, correction.scale);
+      continue;
+    }
+    ++report->num_split_groups;
+    for (size_t k = 0; k < pairs.size(); ++k) {
+      if (alignment.inlier_mask[k]) tied.push_back(pairs[k]);
+    }
+    spdlog::info("split: {} of {} pairs {} -> {} follow one similarity (moves the recent end "
+                 "{:.3g}, {:.2f} % of the path between, scale {:.4f})",
+                 alignment.num_inliers, pairs.size(), input.frames[recent_index].name,
+                 input.frames[old_index].name, correction.translation,
+                 100.0 * correction.fraction_of_path, correction.scale);
+  }
+  report->num_split_pairs += static_cast<int>(tied.size());
+  if (tied.empty()) {
+    report->seconds_split += timer.ElapsedSeconds();
+    return 0;
+  }
+
+  KeepPathBeforeLoopClosing(input, rec, report);
+  const size_t points_before = rec.NumPoints3D();
+  model.GlobalBundle(report, [&](BundleAdjuster& adjuster) {
+    for (const SplitPair& pair : tied) {
+      const Point3D& old = rec.GetPoint3D(pair.old_id);
+      const Point3D& recent = rec.GetPoint3D(pair.recent_id);
+      const double depth = 0.5 * (MeanDepth(rec, old) + MeanDepth(rec, recent));
+      const double focal = rec.GetCamera(rec.GetImage(old.track.elements[0].image_id).camera_id)
+                               .MeanFocalLength();
+      if (!(depth > 0.0)) continue;
+      adjuster.problem().AddResidualBlock(
+          PointCoincidenceCost::Create(options.split_weight * focal / depth), nullptr,
+          adjuster.PointBlock(pair.old_id), adjuster.PointBlock(pair.recent_id));
+    }
+  });
+  model.RetriangulateAll();
+  model.FilterPoints({});
+  model.GlobalBundle(report);
+  model.FilterPoints({});
+  const double seconds = timer.ElapsedSeconds();
+  report->seconds_split += seconds;
+  spdlog::info("split: {} pairs tied in {} groups; points {} -> {}, {:.1f} s", tied.size(),
+               report->num_split_groups, points_before, rec.NumPoints3D(), seconds);
+  return static_cast<int>(tied.size());
+}
+
+}  // namespace loopsfm

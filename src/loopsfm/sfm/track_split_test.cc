@@ -1,0 +1,73 @@
+#include "loopsfm/sfm/track_split.h"
+
+#include <gtest/gtest.h>
+
+#include "loopsfm/sfm/loop_test_problem.h"
+
+namespace loopsfm {
+namespace {
+
+using testing::MapperProblem;
+using testing::RegisterWithDrift;
+using testing::WalkOutAndBack;
+
+IncrementalMapperOptions SplitOptions() {
+  IncrementalMapperOptions options;
+  options.loop_closure.method = LoopClosingMethod::kSplit;
+  options.loop_closure.min_frame_gap = 20;
+  options.num_threads = 1;
+  return options;
+}
+
+TEST(TrackSplit, DriftedWalkBackIsPulledOntoTheFirstFrames) {
+  const MapperProblem p = WalkOutAndBack();
+  const IncrementalMapperOptions options = SplitOptions();
+  MapperState state(p.input, options);
+  RegisterWithDrift(p, state, 0.015);  // 0.6 m at the end of the walk back
+  const testing::PoseError before = testing::ComparePoses(state.reconstruction(), p);
+  const size_t points_before = state.reconstruction().NumPoints3D();
+
+  MapperReport report;
+  Random random(3);
+  const int tied = CloseLoopsBySplitTracks(state, options.loop_closure, random, &report);
+  EXPECT_GE(tied, options.loop_closure.min_num_inliers);
+  EXPECT_GE(report.num_split_groups, 1);
+  EXPECT_EQ(report.num_split_pairs, tied);
+  EXPECT_EQ(report.path_before_loop_closing.size(), 80u);
+  const testing::PoseError after = testing::ComparePoses(state.reconstruction(), p);
+  EXPECT_EQ(after.num_registered, 80);
+  EXPECT_LT(after.max_centre_error, 0.25 * before.max_centre_error)
+      << "before " << before.max_centre_error << ", after " << after.max_centre_error;
+  // Tied pairs agree afterwards and were merged by re-triangulation.
+  EXPECT_LT(state.reconstruction().NumPoints3D(), 0.9 * points_before);
+}
+
+TEST(TrackSplit, ConsistentMapHasNothingToTie) {
+  const MapperProblem p = WalkOutAndBack();
+  const IncrementalMapperOptions options = SplitOptions();
+  MapperState state(p.input, options);
+  RegisterWithDrift(p, state, 0.0);
+  MapperReport report;
+  Random random(3);
+  EXPECT_EQ(CloseLoopsBySplitTracks(state, options.loop_closure, random, &report), 0);
+  EXPECT_EQ(report.num_split_groups, 0);
+  EXPECT_TRUE(report.path_before_loop_closing.empty());
+}
+
+TEST(TrackSplit, CorrectionTooLargeForDriftIsRefused) {
+  const MapperProblem p = WalkOutAndBack();
+  IncrementalMapperOptions options = SplitOptions();
+  options.loop_closure.max_correction_fraction_of_path = 0.005;
+  MapperState state(p.input, options);
+  RegisterWithDrift(p, state, 0.015);
+  const testing::PoseError before = testing::ComparePoses(state.reconstruction(), p);
+  MapperReport report;
+  Random random(3);
+  EXPECT_EQ(CloseLoopsBySplitTracks(state, options.loop_closure, random, &report), 0);
+  EXPECT_GE(report.num_split_groups_refused, 1);
+  const testing::PoseError after = testing::ComparePoses(state.reconstruction(), p);
+  EXPECT_DOUBLE_EQ(after.max_centre_error, before.max_centre_error);
+}
+
+}  // namespace
+}  // namespace loopsfm
