@@ -1,3 +1,4 @@
+#include <algorithm>
 #include <map>
 
 #include <fmt/format.h>
@@ -79,6 +80,13 @@ void PrintSummary(const ReconstructReport& report) {
                        "  split tracks", m.num_split_pairs, m.num_split_groups,
                        m.num_split_groups_refused, m.seconds_split);
   }
+  if (!m.registrations.empty()) {
+    const auto found = std::count_if(m.registrations.begin(), m.registrations.end(),
+                                     [](const RegistrationRounds& r) { return r.second_pose_found; });
+    out += fmt::format("{:<28}{} of {} registrations had a second plausible pose "
+                       "(registrations.csv)\n",
+                       "  alternate poses", found, m.registrations.size());
+  }
   for (const ClosedLoop& loop : m.loops_closed) {
     out += fmt::format("{:<28}{} -> {}: {} of {} point pairs agree, recent end moved {:.3g} "
                        "({:.2f} % of the path between), {:.2f} deg, scale {:.4f}; {:.1f} s\n",
@@ -106,6 +114,7 @@ void AddReconstructCommand(CLI::App& app) {
     std::string refine;
     std::string loop_closing = "posegraph";
     bool withhold_loop_pairs = false;
+    bool alternate_poses = false;
   };
   auto flags = std::make_shared<Flags>();
   CLI::App* cmd = app.add_subcommand(
@@ -145,6 +154,11 @@ void AddReconstructCommand(CLI::App& app) {
                 "Evaluation: map without the pairs between frames 50 or more apart, then add "
                 "them and close the loops at the end (drift grows unchecked until then; compare "
                 "with --loop-closing none)");
+  cmd->add_flag("--alternate-poses", flags->alternate_poses,
+                "Diagnostic: after each registration, a second RANSAC over the correspondences "
+                "the first rejected; writes OUT/registrations.csv (both rounds' inliers, and "
+                "where a second plausible pose was found, how far it is) and plots the two "
+                "rounds' inlier ratios in report.html. Does not change the mapping");
   cmd->callback([flags] {
     ReconstructOptions options;
     options.extract = flags->extract.Resolve();
@@ -167,6 +181,7 @@ void AddReconstructCommand(CLI::App& app) {
     }
     options.mapper.loop_closure.method = method->second;
     options.mapper.loop_closure.withhold_loop_pairs = flags->withhold_loop_pairs;
+    options.mapper.record_alternate_poses = flags->alternate_poses;
     options.self_calibrate = !flags->no_self_calibration;
     options.output.formats = ParseExportFormats(flags->export_formats);
     options.output.write_text = flags->text;

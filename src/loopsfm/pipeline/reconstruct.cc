@@ -1,5 +1,6 @@
 #include "loopsfm/pipeline/reconstruct.h"
 
+#include <fstream>
 #include <unordered_map>
 
 #include "loopsfm/eval/trajectory_metrics.h"
@@ -49,6 +50,25 @@ MapperInput LoadMapperInput(const Database& database, TrackBuildReport* tracks_r
   }
   input.tracks = BuildTracks(num_points2D, verified, {}, tracks_report);
   return input;
+}
+
+void WriteRegistrationRounds(const fs::path& path, const std::vector<RegistrationRounds>& rounds) {
+  std::ofstream out(path);
+  out << "frame,correspondences,inliers,inlier_ratio,second_correspondences,second_inliers,"
+         "second_inlier_ratio,second_pose_found,second_centre_distance,second_rotation_deg\n";
+  for (const RegistrationRounds& r : rounds) {
+    const double ratio = static_cast<double>(r.num_inliers) / std::max(1, r.num_correspondences);
+    const double second_ratio =
+        static_cast<double>(r.second_num_inliers) / std::max(1, r.second_num_correspondences);
+    out << fmt::format("{},{},{},{:.4f},{},{},{:.4f},{},{:.6g},{:.4f}\n", r.frame,
+                       r.num_correspondences, r.num_inliers, ratio, r.second_num_correspondences,
+                       r.second_num_inliers, second_ratio, r.second_pose_found ? 1 : 0,
+                       r.second_centre_distance, r.second_rotation_deg);
+  }
+  if (!out) {
+    throw StorageError(fmt::format("cannot write '{}': check that the folder is writable",
+                                   path.string()));
+  }
 }
 
 ReconstructReport Reconstruct(const fs::path& input, const fs::path& output_dir,
@@ -117,6 +137,10 @@ ReconstructReport Reconstruct(const fs::path& input, const fs::path& output_dir,
   report.stage_times.push_back({"export", stage.ElapsedSeconds()});
   report.total_seconds = total.ElapsedSeconds();
   report.peak_memory_bytes = PeakResidentBytes();
+  if (options.mapper.record_alternate_poses) {
+    WriteRegistrationRounds(output_dir / "registrations.csv", report.mapper.registrations);
+    report.output.written.push_back(output_dir / "registrations.csv");
+  }
   if (options.output.formats.count(ExportFormat::kReport)) {
     stage.Restart();
     WriteHtmlReport(output_dir / "report.html",

@@ -59,6 +59,10 @@ ReconstructReport Reconstruct(const std::filesystem::path& input,
                               const std::filesystem::path& output_dir,
                               const ReconstructOptions& options);
 
+// The alternate pose diagnostic as CSV: one line per registration, both rounds.
+void WriteRegistrationRounds(const std::filesystem::path& path,
+                             const std::vector<RegistrationRounds>& rounds);
+
 // Loads frames, keypoints, verified geometries and tracks for the mappers.
 MapperInput LoadMapperInput(const Database& database, TrackBuildReport* tracks_report);
 

@@ -1,6 +1,7 @@
 #include "loopsfm/pipeline/run_report.h"
 
 #include <chrono>
+#include <map>
 
 #include <fmt/chrono.h>
 #include <fmt/format.h>
@@ -96,6 +97,20 @@ nlohmann::json RunReportData(const ReconstructReport& report,
     data["stages"].push_back({{"name", t.stage}, {"seconds", t.seconds}});
   }
   data["frames"] = ReportFrames(frames, models);
+  // The alternate pose diagnostic: the last registration of each frame, both rounds.
+  std::map<std::string, const RegistrationRounds*> rounds;
+  for (const RegistrationRounds& r : report.mapper.registrations) rounds[r.frame] = &r;
+  for (nlohmann::json& frame : data["frames"]) {
+    const auto it = rounds.find(frame["name"].get<std::string>());
+    if (it == rounds.end()) continue;
+    const RegistrationRounds& r = *it->second;
+    frame["registration_inlier_ratio"] = static_cast<double>(r.num_inliers) / r.num_correspondences;
+    if (r.second_num_correspondences > 0) {
+      frame["alternate_inlier_ratio"] =
+          static_cast<double>(r.second_num_inliers) / r.second_num_correspondences;
+      frame["alternate_pose"] = r.second_pose_found;
+    }
+  }
   data["matrices"] = nlohmann::json::array();
   for (const auto& [title, file] :
        {std::pair{"Similarity (vocabulary tree)", "database_similarity.png"},

@@ -105,6 +105,11 @@ struct IncrementalMapperOptions {
   double abs_pose_max_error_px = 8.0;
   int abs_pose_min_num_inliers = 30;
   double abs_pose_min_inlier_ratio = 0.25;
+  // Diagnostic: after each registration, a second RANSAC over the correspondences the first
+  // rejected; where it finds a pose of its own (as many inliers and as large a ratio as a
+  // registration needs), the frame had two plausible poses (MapperReport::registrations).
+  // Its random numbers are its own, so the mapping is the same with it or without.
+  bool record_alternate_poses = false;
   // A frame that failed to register is tried again once it sees this factor more of the
   // model's tracks, or after the next global bundle adjustment.
   double registration_retry_growth = 1.2;
@@ -157,6 +162,20 @@ struct ClosedLoop {
   double seconds = 0.0;
 };
 
+// A registration's pose estimation and, with record_alternate_poses, the second round over
+// the correspondences the first rejected (second_* zero where there were too few to try).
+struct RegistrationRounds {
+  std::string frame;
+  int num_correspondences = 0;
+  int num_inliers = 0;
+  int second_num_correspondences = 0;
+  int second_num_inliers = 0;
+  bool second_pose_found = false;
+  // How far the second pose is from the first: centre distance (model units), rotation.
+  double second_centre_distance = 0.0;
+  double second_rotation_deg = 0.0;
+};
+
 struct MapperReport {
   int num_models = 0;
   int num_registered = 0;
@@ -199,6 +218,9 @@ struct MapperReport {
   int num_split_groups_refused = 0;
   int num_split_pairs = 0;
   double seconds_split = 0.0;
+  // With record_alternate_poses: each successful registration, in the order they happened
+  // (a frame registered again after a failed bundle appears again).
+  std::vector<RegistrationRounds> registrations;
 };
 
 // Called after each registration with (registered in this model, frames in all).

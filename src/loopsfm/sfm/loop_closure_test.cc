@@ -75,6 +75,41 @@ TEST(LoopCloser, CorrectionTooLargeForDriftIsRefused) {
   EXPECT_GE(report.num_loops_refused, 1);
 }
 
+// The alternate pose diagnostic: a frame at the end of the drifted walk back sees each
+// track's old point (where the first frames put it) and its recent one (where the drifted
+// walk back put it); registered again, one pose fits one end and a second RANSAC over the
+// rest finds the other, as far away as the drift.
+MapperReport RegisterLastFrameAgain(double drift_per_frame) {
+  const MapperProblem p = WalkOutAndBack();
+  IncrementalMapperOptions options = LoopOptions();
+  options.record_alternate_poses = true;
+  MapperState state(p.input, options);
+  RegisterWithDrift(p, state, drift_per_frame);
+  const image_t last = p.input.frames.back().image_id;
+  state.reconstruction().DeRegisterImage(last);
+  MapperReport report;
+  Random random(9);
+  EXPECT_TRUE(state.RegisterImage(last, random, &report));
+  return report;
+}
+
+TEST(AlternatePose, DriftedEndHasTwoPlausiblePoses) {
+  const MapperReport report = RegisterLastFrameAgain(0.015);
+  ASSERT_EQ(report.registrations.size(), 1u);
+  const RegistrationRounds& r = report.registrations[0];
+  EXPECT_TRUE(r.second_pose_found) << r.second_num_inliers << " of " << r.second_num_correspondences;
+  // The walk back's last frame drifted by 39 x 1.5 cm along (0.3, 1, 0.5): 0.68 m.
+  const double drift = 39 * 0.015 * Eigen::Vector3d(0.3, 1.0, 0.5).norm();
+  EXPECT_NEAR(r.second_centre_distance, drift, 0.25 * drift);
+}
+
+TEST(AlternatePose, ConsistentMapHasOnePose) {
+  const MapperReport report = RegisterLastFrameAgain(0.0);
+  ASSERT_EQ(report.registrations.size(), 1u);
+  EXPECT_FALSE(report.registrations[0].second_pose_found);
+  EXPECT_GT(report.registrations[0].num_inliers, 0.9 * report.registrations[0].num_correspondences);
+}
+
 TEST(LoopCloser, OptionsAreChecked) {
   LoopClosureOptions options;
   options.min_frame_gap = 1;

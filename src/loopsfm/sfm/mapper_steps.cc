@@ -1,6 +1,7 @@
 // MapperState's registration and bundle adjustment steps.
 
 #include <algorithm>
+#include <cmath>
 
 #include "loopsfm/estimators/absolute_pose.h"
 #include "loopsfm/estimators/bundle_adjustment.h"
@@ -40,6 +41,41 @@ bool MapperState::RegisterImage(image_t image_id, Random& random, MapperReport* 
   }
   reconstruction_.GetImage(image_id).cam_from_world = result.cam_from_world;
   reconstruction_.RegisterImage(image_id);
+  if (options_.record_alternate_poses) {
+    RegistrationRounds rounds;
+    rounds.frame = image.name;
+    rounds.num_correspondences = static_cast<int>(points2D.size());
+    rounds.num_inliers = result.num_inliers;
+    // The second round sees the correspondences the first rejected (for a keypoint whose
+    // track holds several points, the candidates that did not fit).
+    std::vector<Eigen::Vector2d> rest2D;
+    std::vector<Eigen::Vector3d> rest3D;
+    for (size_t k = 0; k < points2D.size(); ++k) {
+      if (result.inlier_mask[k]) continue;
+      rest2D.push_back(points2D[k]);
+      rest3D.push_back(points3D[k]);
+    }
+    rounds.second_num_correspondences = static_cast<int>(rest2D.size());
+    if (static_cast<int>(rest2D.size()) >= options_.abs_pose_min_num_inliers) {
+      Random second_random(options_.seed ^ (0x9e3779b97f4a7c15ULL * image_id));
+      const AbsolutePoseReport second = EstimateAbsolutePose(
+          rest2D, rest3D, reconstruction_.GetCamera(image.camera_id), pose_options, second_random);
+      rounds.second_num_inliers = second.success ? second.num_inliers : 0;
+      rounds.second_pose_found =
+          second.success && second.num_inliers >= options_.abs_pose_min_num_inliers &&
+          second.num_inliers >= options_.abs_pose_min_inlier_ratio * rest2D.size();
+      if (second.success) {
+        const Rigid3d first_from_second =
+            result.cam_from_world * second.cam_from_world.Inverse();
+        rounds.second_centre_distance =
+            (result.cam_from_world.Inverse().translation -
+             second.cam_from_world.Inverse().translation).norm();
+        rounds.second_rotation_deg =
+            Eigen::AngleAxisd(first_from_second.rotation).angle() * 180.0 / M_PI;
+      }
+    }
+    report->registrations.push_back(rounds);
+  }
   return true;
 }
 

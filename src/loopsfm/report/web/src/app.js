@@ -1,7 +1,7 @@
 // The loopsfm HTML report: renders window.LOOPSFM_REPORT (written by loopsfm beside this
 // script, schema in ../../html_report.h) into the page. Every field is optional; a section
 // without data is left out.
-import { perFrameChart, stagesChart, topViewChart } from './charts.js';
+import { perFrameChart, registrationChart, stagesChart, topViewChart } from './charts.js';
 import { el, fmt, fmtSeconds, isNumber, keyValueTable, section } from './dom.js';
 import { scene3d } from './scene3d.js';
 
@@ -121,6 +121,13 @@ function main() {
     const card3 = section('per-frame', 'Along the video', 'points observed per frame; red crosses mark frames left unregistered');
     root.append(card3);
     frameCanvas = perFrameChart(card3, frames);
+  }
+
+  if (frames.some((f) => isNumber(f.registration_inlier_ratio))) {
+    const card = section('registration', 'Alternate poses',
+      'inlier ratio of each registration, and of a second RANSAC over the correspondences it rejected; triangles mark a second plausible pose');
+    root.append(card);
+    registrationChart(card, frames);
   }
 
   for (const part of [matrices(data.matrices || []), loops(data.loops || [])]) if (part) root.append(part);

@@ -167,3 +167,47 @@ export function perFrameChart(parent, frames) {
   });
   return canvas;
 }
+
+// The alternate pose diagnostic along the video: inlier ratio of each frame's registration,
+// and of the second RANSAC over what the first rejected (triangles where that found a
+// second plausible pose).
+export function registrationChart(parent, frames) {
+  const canvas = chartBox(parent, 'chart-registration');
+  const labels = frames.map((f, i) => (isNumber(f.index) ? f.index : i));
+  const ratio = (value) => (isNumber(value) ? value : null);
+  new Chart(canvas, {
+    type: 'line',
+    data: {
+      labels,
+      datasets: [
+        {
+          label: 'registration inlier ratio',
+          data: frames.map((f) => ratio(f.registration_inlier_ratio)),
+          borderColor: kPalette[0],
+          backgroundColor: kPalette[0],
+          pointRadius: 0,
+          borderWidth: 1.5,
+        },
+        {
+          label: 'second round inlier ratio',
+          data: frames.map((f) => ratio(f.alternate_inlier_ratio)),
+          borderColor: '#e08a1b',
+          backgroundColor: '#e08a1b',
+          pointRadius: frames.map((f) => (f.alternate_pose ? 5 : 0)),
+          pointStyle: 'triangle',
+          borderWidth: 1,
+        },
+      ],
+    },
+    options: {
+      plugins: { legend: { position: 'top' } },
+      interaction: { mode: 'index', intersect: false },
+      spanGaps: false,
+      scales: {
+        x: { title: { display: true, text: 'frame' }, ticks: { autoSkip: true, maxRotation: 0 } },
+        y: { beginAtZero: true, max: 1, title: { display: true, text: 'inlier ratio' } },
+      },
+    },
+  });
+  return canvas;
+}

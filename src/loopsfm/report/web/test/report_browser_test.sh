@@ -21,6 +21,6 @@ mkdir -p "$work"
 "$loopsfm" synth cylinder -o "$work/scene" --frames 40 >"$work/synth.log" 2>&1 ||
   { cat "$work/synth.log"; exit 1; }
 "$loopsfm" reconstruct "$work/scene/images" -o "$work/run" --intrinsics "$work/scene/intrinsics.txt" \
-  --groundtruth "$work/scene/groundtruth.txt" >"$work/reconstruct.log" 2>&1 ||
+  --groundtruth "$work/scene/groundtruth.txt" --alternate-poses >"$work/reconstruct.log" 2>&1 ||
   { cat "$work/reconstruct.log"; exit 1; }
 "$node" "$here/report_browser_test.mjs" "$work/run/report.html" "$work/screenshot.png"
