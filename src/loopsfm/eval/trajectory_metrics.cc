@@ -95,6 +95,10 @@ LoopGaps ComputeLoopGaps(const std::vector<TrajectoryEntry>& ground_truth,
   gaps.mean = gaps.median = gaps.max = kNaN;
   if (!(gaps.max_distance > 0.0)) return gaps;
 
+  auto viewing_direction = [&](size_t k) -> Eigen::Vector3d {
+    return ground_truth[k].world_from_cam.rotation * Eigen::Vector3d::UnitZ();
+  };
+  const double min_cos_view = std::cos(options.loop_max_view_angle_deg * M_PI / 180.0);
   std::vector<double> values;
   for (size_t i = 0; i < n; ++i) {
     if (!matched_by_gt_index[i]) continue;
@@ -102,6 +106,7 @@ LoopGaps ComputeLoopGaps(const std::vector<TrajectoryEntry>& ground_truth,
     double best_distance = gaps.max_distance;
     for (size_t j = i + gaps.min_frame_gap; j < n; ++j) {
       if (!matched_by_gt_index[j]) continue;
+      if (viewing_direction(i).dot(viewing_direction(j)) < min_cos_view) continue;
       const double distance = (gt_centre(j) - gt_centre(i)).norm();
       if (distance <= best_distance) {
         best_distance = distance;
@@ -142,6 +147,9 @@ void TrajectoryEvalOptions::Check() const {
                          loop_min_frame_gap);
   LOOPSFM_REQUIRE_OPTION(loop_max_distance_steps > 0.0,
                          "loop_max_distance_steps must be > 0, got {}", loop_max_distance_steps);
+  LOOPSFM_REQUIRE_OPTION(loop_max_view_angle_deg > 0.0 && loop_max_view_angle_deg <= 180.0,
+                         "loop_max_view_angle_deg must be in (0, 180], got {}",
+                         loop_max_view_angle_deg);
 }
 
 std::string TrajectoryNameKey(const std::string& name) {

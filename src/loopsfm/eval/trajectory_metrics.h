@@ -10,7 +10,8 @@
 //             truth, with the alignment's scale applied to the estimated translations;
 //   coverage  matched frames over ground-truth frames;
 //   loop gap  for each ground-truth revisit (two frames far apart in the sequence whose true
-//             centres are close), the length of the difference between the aligned
+//             centres are close and which look the same way, so that the second sees again
+//             what the first saw), the length of the difference between the aligned
 //             estimated offset and the true offset between them: how far the two ends of
 //             a loop disagree. Drift that is not closed shows here even where the ATE,
 //             averaged over the whole path, stays small.
@@ -47,9 +48,12 @@ struct TrajectoryEvalOptions {
   // Loop gap: a revisit pairs a frame with the closest later frame at least this many
   // ground-truth frames away (0: a fifth of the ground-truth frames, at least 10) whose true
   // centre is within loop_max_distance_steps times the median distance between consecutive
-  // ground-truth centres.
+  // ground-truth centres and whose true viewing direction is within loop_max_view_angle_deg
+  // of the first's (a place passed looking the other way is not seen again: no method can
+  // close a loop there).
   int loop_min_frame_gap = 0;
   double loop_max_distance_steps = 3.0;
+  double loop_max_view_angle_deg = 60.0;
   void Check() const;  // throws InvalidArgument
 };
 

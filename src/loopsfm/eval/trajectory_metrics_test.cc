@@ -352,6 +352,23 @@ TEST(TrajectoryMetrics, LoopGapMeasuresHowFarTheSecondPassIsOff) {
   EXPECT_EQ(json["loop_gaps"]["num_revisits"].get<size_t>(), 20u);
 }
 
+TEST(TrajectoryMetrics, APlacePassedLookingTheOtherWayIsNoRevisit) {
+  // The extra fifth of a lap walks past the first frames' places turned by 120 degrees
+  // (a figure-eight's crossing, the other side of a street): it does not see them again.
+  std::vector<TrajectoryEntry> gt = LapAndAFifth();
+  const Eigen::Quaterniond turn(Eigen::AngleAxisd(2.0 * M_PI / 3.0, Eigen::Vector3d::UnitY()));
+  for (int i = 100; i < 120; ++i) gt[i].world_from_cam.rotation = gt[i].world_from_cam.rotation * turn;
+  TrajectoryEvalOptions options;
+  options.loop_max_distance_steps = 0.5;
+  TrajectoryMetrics m = EvaluateTrajectory(gt, gt, options);
+  ASSERT_TRUE(m.loop_gaps.has_value());
+  EXPECT_EQ(m.loop_gaps->num_revisits, 0u);
+  // Within the angle they count again.
+  options.loop_max_view_angle_deg = 150.0;
+  m = EvaluateTrajectory(gt, gt, options);
+  EXPECT_EQ(m.loop_gaps->num_revisits, 20u);
+}
+
 TEST(TrajectoryMetrics, OptionsAreChecked) {
   TrajectoryEvalOptions options;
   options.rpe_step = -1;
@@ -361,6 +378,9 @@ TEST(TrajectoryMetrics, OptionsAreChecked) {
   EXPECT_THROW(EvaluateTrajectory(std::vector<TrajectoryEntry>{}, {}, options), InvalidArgument);
   options = {};
   options.loop_max_distance_steps = 0.0;
+  EXPECT_THROW(options.Check(), InvalidArgument);
+  options = {};
+  options.loop_max_view_angle_deg = 0.0;
   EXPECT_THROW(options.Check(), InvalidArgument);
 }
 
