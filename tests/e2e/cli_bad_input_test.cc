@@ -465,5 +465,52 @@ TEST_F(CliBadInputTest, RerunningExtractAndMatchResumes) {
   EXPECT_EQ(SnapshotDatabase(db), matched) << "re-running match changed the database";
 }
 
+TEST_F(CliBadInputTest, RerunWithOtherInputOrOptionsIsRefused) {
+  // db_ holds good_images extracted and matched with the defaults.
+  const CommandResult features =
+      RunLoopsfm({"extract", assets_->good_images.string(), "-d", db_.string(), "--max-features",
+                  "500"});
+  ExpectUserError(features);
+  EXPECT_TRUE(ContainsRegex(features.output, "sift\\.max_features: 8192 -> 500")) << features;
+  EXPECT_TRUE(ContainsRegex(features.output, "--overwrite")) << features;
+
+  // Another folder of images into the same database.
+  const fs::path other = dir() / "other";
+  fs::create_directories(other);
+  int copied = 0;
+  for (const auto& entry : fs::directory_iterator(assets_->good_images)) {
+    if (copied++ < 3) fs::copy_file(entry.path(), other / entry.path().filename());
+  }
+  const CommandResult source = RunLoopsfm({"extract", other.string(), "-d", db_.string()});
+  ExpectUserError(source);
+  EXPECT_TRUE(ContainsRegex(source.output, "source\\.(name|images)")) << source;
+
+  const CommandResult ratio = RunLoopsfm({"match", "-d", db_.string(), "--ratio", "0.7"});
+  ExpectUserError(ratio);
+  EXPECT_TRUE(ContainsRegex(ratio.output, "matcher\\.max_ratio: 0\\.8 -> 0\\.7")) << ratio;
+  ExpectStoredDatabaseIntact();
+
+  // Other pairs with the same matching options add to the stored ones.
+  const CommandResult pairs = RunLoopsfm({"match", "-d", db_.string(), "--pairs", "sequential"});
+  EXPECT_EQ(pairs.exit_code, 0) << pairs;
+}
+
+TEST_F(CliBadInputTest, OverwriteStartsTheOutputFolderAgain) {
+  const fs::path out = dir() / "out";
+  fs::create_directories(out);
+  fs::copy_file(db_, out / "database.db");
+  const std::vector<std::string> args = {"-q", "reconstruct", assets_->good_images.string(), "-o",
+                                         out.string(), "--ratio", "0.7", "--export", "none"};
+  const CommandResult refused = RunLoopsfm(args);
+  ExpectUserError(refused);
+  std::vector<std::string> overwrite = args;
+  overwrite.push_back("--overwrite");
+  const CommandResult again = RunLoopsfm(overwrite);
+  ASSERT_EQ(again.exit_code, 0) << again;
+  // The new database was made with the new ratio: a rerun with it resumes.
+  const CommandResult resumed = RunLoopsfm(args);
+  EXPECT_EQ(resumed.exit_code, 0) << resumed;
+}
+
 }  // namespace
 }  // namespace loopsfm::e2e

@@ -115,6 +115,7 @@ void AddReconstructCommand(CLI::App& app) {
     std::string loop_closing = "posegraph";
     bool withhold_loop_pairs = false;
     bool alternate_poses = false;
+    bool overwrite = false;
   };
   auto flags = std::make_shared<Flags>();
   CLI::App* cmd = app.add_subcommand(
@@ -154,6 +155,9 @@ void AddReconstructCommand(CLI::App& app) {
                 "Evaluation: map without the pairs between frames 50 or more apart, then add "
                 "them and close the loops at the end (drift grows unchecked until then; compare "
                 "with --loop-closing none)");
+  cmd->add_flag("--overwrite", flags->overwrite,
+                "Start again: delete OUT/database.db first instead of resuming from it (needed "
+                "when the input or the extract / match options changed since it was made)");
   cmd->add_flag("--alternate-poses", flags->alternate_poses,
                 "Diagnostic: after each registration, a second RANSAC over the correspondences "
                 "the first rejected; writes OUT/registrations.csv (both rounds' inliers, and "
@@ -182,6 +186,7 @@ void AddReconstructCommand(CLI::App& app) {
     options.mapper.loop_closure.method = method->second;
     options.mapper.loop_closure.withhold_loop_pairs = flags->withhold_loop_pairs;
     options.mapper.record_alternate_poses = flags->alternate_poses;
+    options.overwrite = flags->overwrite;
     options.self_calibrate = !flags->no_self_calibration;
     options.output.formats = ParseExportFormats(flags->export_formats);
     options.output.write_text = flags->text;

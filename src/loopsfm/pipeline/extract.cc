@@ -1,4 +1,5 @@
 #include "loopsfm/pipeline/extract.h"
+#include "loopsfm/pipeline/fingerprint.h"
 
 #include <map>
 #include <unordered_set>
@@ -100,6 +101,8 @@ ExtractReport ExtractFeatures(const std::filesystem::path& input, Database& data
   const int previous_cv_threads = cv::getNumThreads();
   cv::setNumThreads(1);
 
+  // Stored features from another source or other options must not be mixed with new ones.
+  CheckFingerprint(database, "extract", ExtractFingerprint(input, options));
   // Later stages pick defaults by the kind of input (e.g. loop detection for video).
   database.WriteMeta("source_kind", source->Info().kind == SourceKind::kVideo ? "video" : "images");
   // Where the frames come from, for exports that need their pixels again (`loopsfm export`).

@@ -1,4 +1,5 @@
 #include "loopsfm/pipeline/match.h"
+#include "loopsfm/pipeline/fingerprint.h"
 
 #include <algorithm>
 #include <map>
@@ -164,6 +165,7 @@ std::vector<bool> PairMatcher::Match(const std::vector<ImagePair>& all_pairs, Ma
 
 MatchReport MatchPairs(Database& database, const MatchOptions& options) {
   options.Check();
+  CheckFingerprint(database, "match", MatchFingerprint(options));
   Timer timer;
   MatchReport report;
   std::vector<image_t> ordered_ids;

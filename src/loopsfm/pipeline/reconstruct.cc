@@ -86,7 +86,11 @@ ReconstructReport Reconstruct(const fs::path& input, const fs::path& output_dir,
     throw StorageError(fmt::format("cannot create output folder '{}': {}", output_dir.string(),
                                    ec ? ec.message() : "a file of that name exists"));
   }
-  Database database = Database::Open((output_dir / "database.db").string());
+  const fs::path database_path = output_dir / "database.db";
+  if (options.overwrite) {
+    for (const char* suffix : {"", "-wal", "-shm"}) fs::remove(database_path.string() + suffix);
+  }
+  Database database = Database::Open(database_path.string());
 
   Timer stage;
   report.extract = ExtractFeatures(input, database, options.extract);

@@ -28,6 +28,9 @@ struct ReconstructOptions {
   IncrementalMapperOptions mapper;
   // What is written after mapping.
   ExportOptions output;
+  // Start again: delete OUT/database.db (and its journal) before the run, instead of
+  // resuming from it (a database made from another input or with other options is refused).
+  bool overwrite = false;
   // Ground truth (trajectory file) to score the path against in the report; empty: none.
   std::filesystem::path groundtruth;
   // Show progress on stderr.
