@@ -53,6 +53,43 @@ TEST(CliHardVideoTest, StreetWithAbruptTurnsShakeNoiseAndBlurStaysInOneModel) {
   EXPECT_LT(metrics.rotation_error_mean_deg, 0.6);
 }
 
+// A video with a black stretch in the middle (a hand over the lens, 15 frames): the path
+// must go on on both sides, in one model or in two, each accurate; never a crash.
+TEST(CliHardVideoTest, BlackStretchInTheMiddleKeepsThePathOnBothSides) {
+  constexpr int kFrames = 120, kDarkFirst = 50, kDarkLast = 64;
+  TempDir tmp;
+  const fs::path scene = tmp / "scene";
+  const CommandResult synth = RunLoopsfm(
+      {"-q", "synth", "street", "--video", "-o", scene.string(), "--frames",
+       std::to_string(kFrames), "--width", "320", "--height", "240", "--look-ahead", "30",
+       "--dark", fmt::format("{}-{}", kDarkFirst, kDarkLast)});
+  ASSERT_EQ(synth.exit_code, 0) << "rendering failed" << synth;
+  const fs::path out = tmp / "out";
+  const CommandResult run =
+      RunLoopsfm({"reconstruct", (scene / "video.mp4").string(), "--intrinsics",
+                  (scene / "intrinsics.txt").string(), "-o", out.string(), "--export",
+                  "colmap"});
+  ASSERT_EQ(run.exit_code, 0) << run;
+  const std::vector<TrajectoryEntry> truth = ReadTrajectoryFile(scene / "groundtruth.txt");
+  int before = 0, after = 0, dark = 0;
+  for (int m = 0; fs::exists(out / "sparse" / std::to_string(m)); ++m) {
+    const Reconstruction model = ReadColmapModel(out / "sparse" / std::to_string(m));
+    const TrajectoryMetrics metrics = EvaluateTrajectory(model, truth);
+    ASSERT_TRUE(metrics.aligned) << "model " << m << ": " << metrics.explanation;
+    std::cout << fmt::format("[ info     ] black stretch: model {} has {} frames, ATE {:.4f} % "
+                             "of its path\n",
+                             m, metrics.num_matched, 100.0 * metrics.ate_fraction_of_path);
+    EXPECT_LT(metrics.ate_fraction_of_path, 0.003) << "model " << m;
+    for (const auto& [id, image] : model.Images()) {
+      const int index = std::stoi(image.name.substr(6, 6));  // frame_%06d.png
+      (index < kDarkFirst ? before : index > kDarkLast ? after : dark) += 1;
+    }
+  }
+  EXPECT_GE(before, static_cast<int>(0.95 * kDarkFirst)) << run;
+  EXPECT_GE(after, static_cast<int>(0.95 * (kFrames - 1 - kDarkLast))) << run;
+  EXPECT_EQ(dark, 0) << "black frames were registered" << run;
+}
+
 // A hand-held walk filmed through a lens with barrel distortion (SIMPLE_RADIAL, k1 = -0.12,
 // like an action camera) and reconstructed as a user without a calibration would: no camera
 // flags. Self-calibration estimates the focal length from the pairs' fundamental matrices
