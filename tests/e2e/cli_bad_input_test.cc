@@ -495,6 +495,21 @@ TEST_F(CliBadInputTest, RerunWithOtherInputOrOptionsIsRefused) {
   EXPECT_EQ(pairs.exit_code, 0) << pairs;
 }
 
+TEST_F(CliBadInputTest, StaticCameraGetsNoModelAndSaysWhy) {
+  // Twenty copies of one frame: a camera that never moves.
+  const fs::path frames = dir() / "static";
+  fs::create_directories(frames);
+  const fs::path one = fs::directory_iterator(assets_->good_images)->path();
+  for (int i = 0; i < 20; ++i) fs::copy_file(one, frames / fmt::format("f_{:02d}.png", i));
+  const fs::path out = dir() / "out";
+  const CommandResult run = RunLoopsfm({"reconstruct", frames.string(), "-o", out.string()});
+  EXPECT_EQ(run.exit_code, 0) << run;
+  EXPECT_TRUE(ContainsRegex(run.output, "no model could be started")) << run;
+  EXPECT_TRUE(ContainsRegex(run.output, "stands still")) << run;
+  EXPECT_FALSE(fs::exists(out / "sparse" / "0")) << run;
+  EXPECT_TRUE(fs::exists(out / "database.db"));
+}
+
 TEST_F(CliBadInputTest, OverwriteStartsTheOutputFolderAgain) {
   const fs::path out = dir() / "out";
   fs::create_directories(out);

@@ -131,7 +131,11 @@ ReconstructReport Reconstruct(const fs::path& input, const fs::path& output_dir,
   report.stage_times.push_back({"map", stage.ElapsedSeconds()});
   if (models.empty()) {
     spdlog::warn("no model could be started: no frame pair had enough matches with a wide enough "
-                 "baseline; try --pairs exhaustive, more frames (--every 1), or --intrinsics");
+                 "baseline ({} frames, {} verified pairs). 3D needs the camera to move through "
+                 "the scene: a camera that stands still or only turns on the spot gives no "
+                 "baseline. Otherwise try --pairs exhaustive, more frames (--every 1), or "
+                 "--intrinsics",
+                 mapper_input.frames.size(), mapper_input.pairs.size());
   }
 
   stage.Restart();
