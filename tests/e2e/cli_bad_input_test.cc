@@ -510,6 +510,23 @@ TEST_F(CliBadInputTest, StaticCameraGetsNoModelAndSaysWhy) {
   EXPECT_TRUE(fs::exists(out / "database.db"));
 }
 
+TEST_F(CliBadInputTest, PortraitPhoneVideoIsTurnedUpright) {
+  // Phones store portrait video as landscape frames with a rotation flag.
+  if (!OnPath("ffmpeg")) GTEST_SKIP() << "ffmpeg is not installed (scripts/setup installs it)";
+  const fs::path portrait = dir() / "portrait.mp4";
+  const CommandResult flag = RunShell(fmt::format(
+      "ffmpeg -v error -y -i {} -c copy -metadata:s:v:0 rotate=90 {}",
+      ShellQuote(assets_->video.string()), ShellQuote(portrait.string())));
+  ASSERT_EQ(flag.exit_code, 0) << flag;
+  const fs::path db = dir() / "portrait.db";
+  const CommandResult run = RunLoopsfm({"extract", portrait.string(), "-d", db.string()});
+  ASSERT_EQ(run.exit_code, 0) << run;
+  const std::vector<Camera> cameras = Database::Open(db.string()).ReadCameras();
+  ASSERT_EQ(cameras.size(), 1u);
+  EXPECT_EQ(cameras[0].width, 120) << "frames were not turned upright";
+  EXPECT_EQ(cameras[0].height, 160);
+}
+
 TEST_F(CliBadInputTest, OverwriteStartsTheOutputFolderAgain) {
   const fs::path out = dir() / "out";
   fs::create_directories(out);
