@@ -495,6 +495,22 @@ TEST_F(CliBadInputTest, RerunWithOtherInputOrOptionsIsRefused) {
   EXPECT_EQ(pairs.exit_code, 0) << pairs;
 }
 
+TEST_F(CliBadInputTest, OneFrameVideoSaysTwoAreNeeded) {
+  const fs::path scene = dir() / "one";
+  const CommandResult synth = RunLoopsfm({"-q", "synth", "cylinder", "--video", "--frames", "1",
+                                          "--width", "160", "--height", "120", "-o",
+                                          scene.string()});
+  ASSERT_EQ(synth.exit_code, 0) << synth;
+  const fs::path out = dir() / "out";
+  const CommandResult run =
+      RunLoopsfm({"reconstruct", (scene / "video.mp4").string(), "-o", out.string()});
+  ExpectUserError(run);
+  EXPECT_TRUE(ContainsRegex(ErrorLine(run), "1 frame: a reconstruction needs at least two"))
+      << run;
+  // What was extracted is kept.
+  EXPECT_EQ(SnapshotDatabase(out / "database.db").frames.size(), 1u);
+}
+
 TEST_F(CliBadInputTest, StaticCameraGetsNoModelAndSaysWhy) {
   // Twenty copies of one frame: a camera that never moves.
   const fs::path frames = dir() / "static";

@@ -98,6 +98,12 @@ ReconstructReport Reconstruct(const fs::path& input, const fs::path& output_dir,
   report.num_frames = database.NumFrames();
   spdlog::info("extract: {} frames ({} new), {:.0f} features/frame", report.num_frames,
                report.extract.frames_extracted, report.extract.FeaturesPerFrame());
+  if (report.num_frames < 2) {
+    throw InputError(fmt::format(
+        "'{}' gave {} frame{}: a reconstruction needs at least two, taken while the camera "
+        "moves; use a longer video (or --every 1 if frames were skipped)",
+        input.string(), report.num_frames, report.num_frames == 1 ? "" : "s"));
+  }
 
   stage.Restart();
   report.match = MatchPairs(database, options.match);
