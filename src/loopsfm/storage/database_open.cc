@@ -143,8 +143,10 @@ void CheckSchemaIsOurs(sqlite3* db, const std::string& path) {
   query("SELECT name FROM sqlite_master WHERE type = 'table' AND name NOT LIKE 'sqlite_%'",
         [&](sqlite3_stmt* stmt) { tables[ColumnText(stmt, 0)]; });
   if (tables.empty()) return;  // a new, empty database
-  for (auto& [table, columns] : tables) {
+  for (auto& [table, table_columns] : tables) {
     if (!kRequiredColumns.count(table)) continue;
+    // A named reference: clang before 16 cannot capture a structured binding.
+    std::set<std::string>& columns = table_columns;
     query(fmt::format("PRAGMA table_info(\"{}\")", table),
           [&](sqlite3_stmt* stmt) { columns.insert(ColumnText(stmt, 1)); });
   }
