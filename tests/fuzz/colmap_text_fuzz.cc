@@ -1,0 +1,12 @@
+// ReadColmapModelText on cameras.txt, images.txt and points3D.txt cut from one input at
+// kFileSeparator (in that order).
+
+#include "fuzz_util.h"
+#include "loopsfm/storage/colmap_model.h"
+
+extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
+  using namespace loopsfm::fuzz;
+  const auto dir = WriteModelFolder(data, size, "colmap_text", ".txt");
+  ExpectTypedErrors([&] { loopsfm::ReadColmapModelText(dir); });
+  return 0;
+}
