@@ -82,8 +82,14 @@ inline BlobView ReadMatrixBlob(sqlite3_stmt* stmt, int col, size_t scalar_size, 
   BlobView view{sqlite3_column_int64(stmt, col), sqlite3_column_int64(stmt, col + 1),
                 sqlite3_column_blob(stmt, col + 2)};
   const int64_t num_bytes = sqlite3_column_bytes(stmt, col + 2);
-  if (view.rows < 0 || view.cols < 0 ||
-      num_bytes != view.rows * view.cols * static_cast<int64_t>(scalar_size)) {
+  // rows * cols * scalar_size == num_bytes, by division: the product of two corrupt counts
+  // can overflow int64.
+  const int64_t num_entries = num_bytes / static_cast<int64_t>(scalar_size);
+  const bool consistent =
+      view.rows >= 0 && view.cols >= 0 && num_bytes % static_cast<int64_t>(scalar_size) == 0 &&
+      (view.rows == 0 ? num_entries == 0
+                      : num_entries % view.rows == 0 && num_entries / view.rows == view.cols);
+  if (!consistent) {
     throw StorageError(fmt::format(
         "database {}: {} is corrupt ({} x {} entries but {} bytes); re-run the stage that "
         "wrote it, or start from a new database",
