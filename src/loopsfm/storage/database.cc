@@ -283,24 +283,25 @@ FeatureKeypoints Database::ReadKeypoints(image_t image_id) const {
   if (!Step(stmt)) return {};
   const std::string what = fmt::format("keypoints of image {}", image_id);
   const BlobView blob = ReadMatrixBlob(stmt, 0, sizeof(float), what);
-  FeatureKeypoints keypoints(blob.rows);
-  if (blob.rows == 0) return keypoints;
+  if (blob.rows == 0) return {};
   const auto* v = static_cast<const float*>(blob.data);
   const int64_t c = blob.cols;
   // COLMAP writes 6 columns; older COLMAP and other tools write (x, y, scale, orientation)
-  // or just (x, y).
+  // or just (x, y). Checked before allocating: with 0 columns, any row count fits 0 bytes.
+  if (c != 6 && c != 4 && c != 2) {
+    throw StorageError(fmt::format("database {}: {} have {} columns; expected 2, 4 or 6",
+                                   path_, what, c));
+  }
+  FeatureKeypoints keypoints(blob.rows);
   for (int64_t i = 0; i < blob.rows; ++i) {
     const float* row = v + i * c;
     if (c == 6) {
       keypoints[i] = {row[0], row[1], row[2], row[3], row[4], row[5]};
     } else if (c == 4) {
       keypoints[i] = FeatureKeypoint::FromScaleOrientation(row[0], row[1], row[2], row[3]);
-    } else if (c == 2) {
+    } else {
       keypoints[i].x = row[0];
       keypoints[i].y = row[1];
-    } else {
-      throw StorageError(fmt::format("database {}: {} have {} columns; expected 2, 4 or 6",
-                                     path_, what, c));
     }
   }
   return keypoints;
