@@ -92,15 +92,19 @@ Camera ReadCameraRow(sqlite3_stmt* stmt, const std::string& path) {
   camera.model_id = static_cast<CameraModelId>(model);
   camera.width = sqlite3_column_int(stmt, 2);
   camera.height = sqlite3_column_int(stmt, 3);
-  const int num_bytes = sqlite3_column_bytes(stmt, 4);
-  camera.params.resize(num_bytes / sizeof(double));
-  if (num_bytes > 0) std::memcpy(camera.params.data(), sqlite3_column_blob(stmt, 4), num_bytes);
-  camera.has_prior_focal_length = sqlite3_column_int64(stmt, 5) != 0;
-  if (static_cast<int>(camera.params.size()) != CameraModelNumParams(camera.model_id)) {
-    throw StorageError(fmt::format("database {}: camera {} ({}) has {} parameters, expected {}",
-                                   path, camera.camera_id, camera.ModelName(),
-                                   camera.params.size(), CameraModelNumParams(camera.model_id)));
+  const size_t num_bytes = static_cast<size_t>(sqlite3_column_bytes(stmt, 4));
+  const size_t num_params = static_cast<size_t>(CameraModelNumParams(camera.model_id));
+  // Checked before copying: a byte count that is not a whole number of doubles would
+  // overrun the parameter vector.
+  if (num_bytes != num_params * sizeof(double)) {
+    throw StorageError(fmt::format(
+        "database {}: camera {} ({}) has {} bytes of parameters, expected {} ({} doubles)", path,
+        camera.camera_id, camera.ModelName(), num_bytes, num_params * sizeof(double),
+        num_params));
   }
+  camera.params.resize(num_params);
+  std::memcpy(camera.params.data(), sqlite3_column_blob(stmt, 4), num_bytes);
+  camera.has_prior_focal_length = sqlite3_column_int64(stmt, 5) != 0;
   return camera;
 }
 }  // namespace
