@@ -70,8 +70,9 @@ inline point3D_t WrittenPoint3DId(const Reconstruction& reconstruction, const Po
 class ModelBuilder {
  public:
   void AddCamera(Camera camera, const std::string& where) {
-    if (reconstruction_.ExistsCamera(camera.camera_id)) {
-      throw InputError(fmt::format("{}: camera id {} appears twice", where, camera.camera_id));
+    if (camera.camera_id == kInvalidCameraId || reconstruction_.ExistsCamera(camera.camera_id)) {
+      throw InputError(
+          fmt::format("{}: camera id {} is invalid or appears twice", where, camera.camera_id));
     }
     try {
       camera.Check();
