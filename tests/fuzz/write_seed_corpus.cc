@@ -1,7 +1,7 @@
 // Writes the seed corpus of the fuzz targets with loopsfm's own writers: a few small valid
 // files of each format and edge cases cut from them (empty, truncated, one byte flipped).
-// Run once to (re)create tests/fuzz/corpus/<target>/seed_*; reproducers of findings sit
-// beside them as crash_* and are not touched:
+// Run once to (re)create tests/fuzz/corpus/<target>/seed_*; the reproducers of findings
+// (crash_*) and hand-made edge cases (edge_*) beside them are not touched:
 //   cmake --build BUILD --target write_seed_corpus && BUILD/tests/fuzz/write_seed_corpus tests/fuzz/corpus
 
 #include <cstdio>
