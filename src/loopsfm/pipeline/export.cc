@@ -101,7 +101,9 @@ class Colorizer {
         const int col = std::clamp(static_cast<int>(p.xy.x()), 0, frame.image.cols - 1);
         const int row = std::clamp(static_cast<int>(p.xy.y()), 0, frame.image.rows - 1);
         const cv::Vec3b bgr = frame.image.at<cv::Vec3b>(row, col);
-        sums_[m][p.point3D_id] += Eigen::Vector3d(bgr[2], bgr[1], bgr[0]);
+        // try_emplace: a default-constructed Eigen vector is uninitialised, not zero.
+        sums_[m].try_emplace(p.point3D_id, Eigen::Vector3d::Zero()).first->second +=
+            Eigen::Vector3d(bgr[2], bgr[1], bgr[0]);
         ++counts_[m][p.point3D_id];
       }
     }
