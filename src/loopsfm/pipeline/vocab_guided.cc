@@ -91,19 +91,11 @@ void MatchVocabTreeGuided(Database& database, const std::vector<image_t>& ordere
     spdlog::info("vocabtree: sequential waves {} pairs ({} verified), of which quadratic steps {} ({} verified)",
                  seq.num_tried, seq.num_verified, seq.num_quadratic_tried, seq.num_quadratic_verified);
   }
-  // Pairs stored by earlier runs (any strategy) count as tried.
-  for (const ImagePair& pair : database.ReadAllMatchedPairs()) {
-    if (index_of.count(pair.image_id1) && index_of.count(pair.image_id2)) {
-      const int i = index_of.at(pair.image_id1), j = index_of.at(pair.image_id2);
-      tried(i, j) = tried(j, i) = true;
-    }
-  }
-  for (const VerifiedPair& pair : database.ReadVerifiedPairs()) {
-    if (index_of.count(pair.pair.image_id1) && index_of.count(pair.pair.image_id2)) {
-      const int i = index_of.at(pair.pair.image_id1), j = index_of.at(pair.pair.image_id2);
-      verified(i, j) = verified(j, i) = true;
-    }
-  }
+  // Pairs stored by an earlier run are not marked tried up front: the rounds below propose
+  // exactly what an uninterrupted run proposes, and the matcher hands back a stored pair's
+  // result without matching it again. A resumed run thus ends with the same pairs as one
+  // that was never interrupted (pairs of other strategies still reach the mapper, which
+  // reads every verified pair).
   report->vocab.match_seconds += timer.ElapsedSeconds();
 
   timer.Restart();
