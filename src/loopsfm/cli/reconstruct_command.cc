@@ -116,6 +116,7 @@ void AddReconstructCommand(CLI::App& app) {
     bool withhold_loop_pairs = false;
     bool alternate_poses = false;
     bool overwrite = false;
+    double checkpoint_every = 60.0;
   };
   auto flags = std::make_shared<Flags>();
   CLI::App* cmd = app.add_subcommand(
@@ -156,8 +157,15 @@ void AddReconstructCommand(CLI::App& app) {
                 "them and close the loops at the end (drift grows unchecked until then; compare "
                 "with --loop-closing none)");
   cmd->add_flag("--overwrite", flags->overwrite,
-                "Start again: delete OUT/database.db first instead of resuming from it (needed "
-                "when the input or the extract / match options changed since it was made)");
+                "Start again: delete OUT/database.db and OUT/mapper_checkpoint.bin first instead "
+                "of resuming from them (needed when the input or the extract / match options "
+                "changed since they were made)");
+  cmd->add_option("--checkpoint-every", flags->checkpoint_every,
+                  "Save the mapping state to OUT/mapper_checkpoint.bin every this many seconds "
+                  "and when mapping ends; a rerun after an interruption goes on from it (and "
+                  "one after a finished run skips mapping). 0: no checkpoints")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
   cmd->add_flag("--alternate-poses", flags->alternate_poses,
                 "Diagnostic: after each registration, a second RANSAC over the correspondences "
                 "the first rejected; writes OUT/registrations.csv (both rounds' inliers, and "
@@ -187,6 +195,7 @@ void AddReconstructCommand(CLI::App& app) {
     options.mapper.loop_closure.withhold_loop_pairs = flags->withhold_loop_pairs;
     options.mapper.record_alternate_poses = flags->alternate_poses;
     options.overwrite = flags->overwrite;
+    options.checkpoint_interval_seconds = flags->checkpoint_every;
     options.self_calibrate = !flags->no_self_calibration;
     options.output.formats = ParseExportFormats(flags->export_formats);
     options.output.write_text = flags->text;

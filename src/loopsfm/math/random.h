@@ -4,7 +4,10 @@
 // Parallel code derives one generator per work item with Random::Derive(item).
 
 #include <cstdint>
+#include <optional>
 #include <random>
+#include <sstream>
+#include <string>
 #include <vector>
 
 namespace loopsfm {
@@ -20,6 +23,22 @@ class Random {
 
   uint64_t Seed() const { return seed_; }
   std::mt19937_64& Engine() { return engine_; }
+
+  // The whole state as text (seed and engine), and a generator restored from it that draws
+  // exactly what this one would have drawn next (checkpoints). FromState returns nullopt
+  // for text that is not a state.
+  std::string State() const {
+    std::ostringstream out;
+    out << seed_ << ' ' << engine_;
+    return out.str();
+  }
+  static std::optional<Random> FromState(const std::string& state) {
+    std::istringstream in(state);
+    Random random;
+    in >> random.seed_ >> random.engine_;
+    if (in.fail()) return std::nullopt;
+    return random;
+  }
 
   // Uniform integer in [lo, hi].
   int64_t UniformInt(int64_t lo, int64_t hi) {

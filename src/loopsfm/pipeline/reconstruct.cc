@@ -4,6 +4,7 @@
 #include <unordered_map>
 
 #include "loopsfm/eval/trajectory_metrics.h"
+#include "loopsfm/pipeline/mapper_checkpoint.h"
 #include "loopsfm/pipeline/run_report.h"
 #include "loopsfm/report/html_report.h"
 #include "loopsfm/scene/dataset_files.h"
@@ -87,8 +88,10 @@ ReconstructReport Reconstruct(const fs::path& input, const fs::path& output_dir,
                                    ec ? ec.message() : "a file of that name exists"));
   }
   const fs::path database_path = output_dir / "database.db";
+  const fs::path checkpoint_path = output_dir / "mapper_checkpoint.bin";
   if (options.overwrite) {
     for (const char* suffix : {"", "-wal", "-shm"}) fs::remove(database_path.string() + suffix);
+    fs::remove(checkpoint_path);
   }
   Database database = Database::Open(database_path.string());
 
@@ -108,8 +111,10 @@ ReconstructReport Reconstruct(const fs::path& input, const fs::path& output_dir,
   stage.Restart();
   report.match = MatchPairs(database, options.match);
   report.stage_times.push_back({"match", stage.ElapsedSeconds()});
-  spdlog::info("match ({}): {} pairs, {} verified now, {:.0f} mean inliers",
+  spdlog::info("match ({}): {} pairs ({} matched now, {} stored before), {} verified now, {:.0f} "
+               "mean inliers",
                PairStrategyName(options.match.strategy), report.match.num_pairs,
+               report.match.num_pairs_matched, report.match.num_pairs_resumed,
                report.match.num_pairs_verified, report.match.MeanInliers());
 
   stage.Restart();
@@ -130,9 +135,20 @@ ReconstructReport Reconstruct(const fs::path& input, const fs::path& output_dir,
   stage.Restart();
   std::vector<Reconstruction> models;
   {
+    const nlohmann::json fingerprint = MapperCheckpointFingerprint(mapper_input, options.mapper);
+    std::optional<MapperCheckpoint> resume;
+    MapperCheckpointing checkpointing;
+    if (options.checkpoint_interval_seconds > 0.0) {
+      resume = ReadMapperCheckpoint(checkpoint_path, fingerprint);
+      if (resume) checkpointing.resume = &*resume;
+      checkpointing.interval_seconds = options.checkpoint_interval_seconds;
+      checkpointing.save = [&](const MapperCheckpoint& checkpoint) {
+        WriteMapperCheckpoint(checkpoint_path, checkpoint, fingerprint);
+      };
+    }
     Progress progress("map", mapper_input.frames.size(), options.show_progress);
     models = RunIncrementalMapper(mapper_input, options.mapper, &report.mapper,
-                                  [&](size_t, size_t) { progress.Advance(); });
+                                  [&](size_t, size_t) { progress.Advance(); }, checkpointing);
   }
   report.stage_times.push_back({"map", stage.ElapsedSeconds()});
   if (models.empty()) {

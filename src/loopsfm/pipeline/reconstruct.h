@@ -2,7 +2,8 @@
 // The whole job in one call: extract, match, map, export. Every stage resumes from what
 // OUT/database.db already holds, so an interrupted run continues where it stopped.
 //
-// Outputs: OUT/database.db (COLMAP-compatible), then what ReconstructOptions::output asks for
+// Outputs: OUT/database.db (COLMAP-compatible), OUT/mapper_checkpoint.bin (mapping state,
+// pipeline/mapper_checkpoint.h), then what ReconstructOptions::output asks for
 // (pipeline/export.h: COLMAP models, PLY, trajectory, frames, transforms.json, undistorted
 // layout, report).
 
@@ -33,6 +34,9 @@ struct ReconstructOptions {
   bool overwrite = false;
   // Ground truth (trajectory file) to score the path against in the report; empty: none.
   std::filesystem::path groundtruth;
+  // Save the mapper's state to OUT/mapper_checkpoint.bin every this many seconds of
+  // mapping, and when it has finished, so a rerun goes on from there; 0: never.
+  double checkpoint_interval_seconds = 60.0;
   // Show progress on stderr.
   bool show_progress = true;
   void Check() const;

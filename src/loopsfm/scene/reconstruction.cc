@@ -112,6 +112,83 @@ std::vector<image_t> Reconstruction::RegImageIds() const {
   return ids;
 }
 
+std::vector<point3D_t> Reconstruction::Point3DIds() const {
+  std::vector<point3D_t> ids;
+  ids.reserve(points3D_.size());
+  for (const auto& [id, point] : points3D_) ids.push_back(id);
+  std::sort(ids.begin(), ids.end());
+  return ids;
+}
+
+MappedState Reconstruction::SaveMapped() const {
+  MappedState state;
+  for (const auto& [id, camera] : cameras_) state.cameras.push_back(camera);
+  std::sort(state.cameras.begin(), state.cameras.end(),
+            [](const Camera& a, const Camera& b) { return a.camera_id < b.camera_id; });
+  for (const image_t id : reg_image_ids_) {
+    state.registered.push_back({id, images_.at(id).cam_from_world});
+  }
+  for (const point3D_t id : Point3DIds()) {
+    const Point3D& point = points3D_.at(id);
+    state.points.push_back({id, point.xyz, point.color, point.error, point.track.elements});
+  }
+  state.next_point3D_id = next_point3D_id_;
+  return state;
+}
+
+void Reconstruction::RestoreMapped(const MappedState& state) {
+  LOOPSFM_CHECK_MSG(reg_image_ids_.empty() && points3D_.empty(),
+                    "RestoreMapped needs a reconstruction with nothing registered");
+  for (const Camera& camera : state.cameras) {
+    const auto it = cameras_.find(camera.camera_id);
+    if (it == cameras_.end() || it->second.model_id != camera.model_id ||
+        it->second.width != camera.width || it->second.height != camera.height ||
+        it->second.params.size() != camera.params.size()) {
+      throw InputError(fmt::format("saved camera {} ({} {}x{}) is not one of the input's",
+                                   camera.camera_id, camera.ModelName(), camera.width,
+                                   camera.height));
+    }
+    it->second = camera;
+  }
+  for (const MappedState::RegisteredImage& r : state.registered) {
+    const auto it = images_.find(r.image_id);
+    if (it == images_.end() || it->second.registered) {
+      throw InputError(fmt::format("saved frame {} is not an input frame, or appears twice",
+                                   r.image_id));
+    }
+    it->second.cam_from_world = r.cam_from_world;
+    RegisterImage(r.image_id);
+  }
+  point3D_t next_id = state.next_point3D_id;
+  for (const MappedState::SavedPoint& saved : state.points) {
+    if (saved.point3D_id == kInvalidPoint3DId || points3D_.count(saved.point3D_id) > 0 ||
+        saved.track.size() < 2) {
+      throw InputError(fmt::format("saved 3D point {} is invalid, repeated or has fewer than "
+                                   "two observations", saved.point3D_id));
+    }
+    for (const TrackElement& el : saved.track) {
+      const auto it = images_.find(el.image_id);
+      if (it == images_.end() || !it->second.registered ||
+          el.point2D_idx >= it->second.points2D.size() ||
+          it->second.points2D[el.point2D_idx].HasPoint3D()) {
+        throw InputError(fmt::format("saved 3D point {} is observed by keypoint {} of frame {}, "
+                                     "which is not a free keypoint of a registered frame",
+                                     saved.point3D_id, el.point2D_idx, el.image_id));
+      }
+      Image& image = it->second;
+      image.points2D[el.point2D_idx].point3D_id = saved.point3D_id;
+      ++image.num_points3D;
+    }
+    Point3D& point = points3D_[saved.point3D_id];
+    point.xyz = saved.xyz;
+    point.color = saved.color;
+    point.error = saved.error;
+    point.track.elements = saved.track;
+    next_id = std::max(next_id, saved.point3D_id + 1);
+  }
+  next_point3D_id_ = next_id;
+}
+
 std::optional<double> Reconstruction::ReprojectionError(const Point3D& point,
                                                         const TrackElement& el) const {
   const Image& image = images_.at(el.image_id);

@@ -50,6 +50,28 @@ struct Point3D {
   Track track;
 };
 
+// What mapping changes in a reconstruction whose cameras and images come from elsewhere
+// (the database): the intrinsics, the registered frames with their poses, in registration
+// order, and the 3D points with their ids and the next id. Restoring it reproduces the
+// reconstruction exactly (the mapper's checkpoints).
+struct MappedState {
+  struct RegisteredImage {
+    image_t image_id = kInvalidImageId;
+    Rigid3d cam_from_world;
+  };
+  struct SavedPoint {
+    point3D_t point3D_id = kInvalidPoint3DId;
+    Eigen::Vector3d xyz = Eigen::Vector3d::Zero();
+    Eigen::Matrix<uint8_t, 3, 1> color = Eigen::Matrix<uint8_t, 3, 1>::Zero();
+    double error = -1.0;
+    std::vector<TrackElement> track;
+  };
+  std::vector<Camera> cameras;
+  std::vector<RegisteredImage> registered;
+  std::vector<SavedPoint> points;  // by id
+  point3D_t next_point3D_id = 1;
+};
+
 class Reconstruction {
  public:
   // Cameras and images are added unregistered; ids come from the database.
@@ -91,6 +113,15 @@ class Reconstruction {
   size_t NumPoints3D() const { return points3D_.size(); }
   // Registered image ids, in id order.
   std::vector<image_t> RegImageIds() const;
+  // 3D point ids in id order: loops whose outcome depends on the order (random sampling,
+  // points created as they go) iterate these, so a restored reconstruction behaves the same.
+  std::vector<point3D_t> Point3DIds() const;
+
+  MappedState SaveMapped() const;
+  // Onto a reconstruction holding the same cameras and images with none registered and no
+  // points (as the mapper starts). Throws InputError when the state does not fit them (a
+  // camera, image or keypoint it names is missing, or a keypoint is observed twice).
+  void RestoreMapped(const MappedState& state);
   bool IsRegistered(image_t id) const { return images_.at(id).registered; }
 
   // Pixel reprojection error of one observation; nullopt when the point is behind the camera.

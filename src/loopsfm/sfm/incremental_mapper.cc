@@ -7,6 +7,7 @@
 
 #include "loopsfm/sfm/initial_pair.h"
 #include "loopsfm/sfm/loop_closure.h"
+#include "loopsfm/sfm/mapper_checkpoint.h"
 #include "loopsfm/sfm/track_split.h"
 #include "loopsfm/sfm/mapper_state.h"
 #include "loopsfm/sfm/model_merger.h"
@@ -96,19 +97,35 @@ constexpr int kMaxMergeFailures = 3;
 class IncrementalMapper {
  public:
   IncrementalMapper(const MapperInput& input, const IncrementalMapperOptions& options,
-                    MapperReport* report, const MapperProgress& progress)
+                    MapperReport* report, const MapperProgress& progress,
+                    const MapperCheckpointing& checkpointing)
       : input_(input), options_(options), report_(*report), progress_(progress),
-        random_(options.seed), loop_closer_(input, options.loop_closure, options.seed + 1) {}
+        checkpointing_(checkpointing), random_(options.seed),
+        loop_closer_(input, options.loop_closure, options.seed + 1) {}
 
   std::vector<Reconstruction> Run() {
     const std::vector<InitialPairCandidate> candidates = RankInitialPairs(input_, options_);
     spdlog::info("mapper: {} initial pair candidates ({} strict)", candidates.size(),
                  std::count_if(candidates.begin(), candidates.end(),
                                [](const auto& c) { return c.tier == 0; }));
-    std::vector<char> tried(candidates.size(), 0);
-    while (static_cast<int>(models_.size()) < options_.max_num_models) {
-      ModelPtr model = StartModel(candidates, &tried);
-      if (!model) break;
+    tried_.assign(candidates.size(), 0);
+    ModelPtr model;
+    bool finished = false;
+    if (checkpointing_.resume) {
+      try {
+        finished = Restore(*checkpointing_.resume, &model);
+      } catch (const InputError& e) {
+        spdlog::warn("mapper: the checkpoint does not fit this input ({}); mapping starts from "
+                     "the beginning", e.what());
+      }
+    }
+    last_checkpoint_.Restart();
+    while (!finished) {
+      if (!model) {
+        if (static_cast<int>(models_.size()) >= options_.max_num_models) break;
+        model = StartModel(candidates);
+        if (!model) break;
+      }
       Grow(model);
       if (static_cast<int>(model->reconstruction().NumRegImages()) >= options_.min_model_size) {
         models_.push_back(std::move(model));
@@ -117,14 +134,18 @@ class IncrementalMapper {
         spdlog::info("mapper: discarded a model of {} frames; its frames stay free",
                      model->reconstruction().NumRegImages());
       }
+      model.reset();
     }
-    MergeKeptModels();
-    std::sort(models_.begin(), models_.end(), [](const ModelPtr& a, const ModelPtr& b) {
-      return a->reconstruction().NumRegImages() > b->reconstruction().NumRegImages();
-    });
-    if (options_.loop_closure.SplitTracks() && !models_.empty()) {
-      Random split_random(options_.seed + 2);
-      CloseLoopsBySplitTracks(*models_[0], options_.loop_closure, split_random, &report_);
+    if (!finished) {
+      MergeKeptModels();
+      std::sort(models_.begin(), models_.end(), [](const ModelPtr& a, const ModelPtr& b) {
+        return a->reconstruction().NumRegImages() > b->reconstruction().NumRegImages();
+      });
+      if (options_.loop_closure.SplitTracks() && !models_.empty()) {
+        Random split_random(options_.seed + 2);
+        CloseLoopsBySplitTracks(*models_[0], options_.loop_closure, split_random, &report_);
+      }
+      if (checkpointing_.save) checkpointing_.save(Save(nullptr, /*finished=*/true));
     }
     std::vector<Reconstruction> result;
     for (ModelPtr& model : models_) {
@@ -141,14 +162,99 @@ class IncrementalMapper {
                        [&](const ModelPtr& m) { return m->reconstruction().IsRegistered(id); });
   }
 
+  // The mapper's state now, `growing` being the model grown (null between models).
+  MapperCheckpoint Save(const MapperState* growing, bool finished) const {
+    MapperCheckpoint checkpoint;
+    checkpoint.finished = finished;
+    auto save_model = [&](const MapperState& model) {
+      MapperCheckpoint::Model saved = model.Save();
+      const auto failures = merge_failures_.find(&model);
+      saved.merge_failures = failures == merge_failures_.end() ? 0 : failures->second;
+      return saved;
+    };
+    for (const ModelPtr& model : models_) checkpoint.kept.push_back(save_model(*model));
+    if (growing) {
+      checkpoint.growing = save_model(*growing);
+      checkpoint.failed_at.assign(growth_.failed_at.begin(), growth_.failed_at.end());
+      std::sort(checkpoint.failed_at.begin(), checkpoint.failed_at.end());
+      checkpoint.ever_failed.assign(growth_.ever_failed.begin(), growth_.ever_failed.end());
+      std::sort(checkpoint.ever_failed.begin(), checkpoint.ever_failed.end());
+      checkpoint.last_global_size = growth_.last_global_size;
+      checkpoint.refined_since_stall = growth_.refined_since_stall;
+    }
+    checkpoint.tried_initial_pairs = tried_;
+    checkpoint.random_state = random_.State();
+    loop_closer_.Save(&checkpoint);
+    checkpoint.report = report_;
+    return checkpoint;
+  }
+
+  // Puts the mapper back in the state saved; `growing` gets the model that was being grown.
+  // Returns whether mapping had finished. Throws InputError, leaving the mapper as it was,
+  // for a state that does not fit this input.
+  bool Restore(const MapperCheckpoint& checkpoint, ModelPtr* growing) {
+    if (checkpoint.tried_initial_pairs.size() != tried_.size()) {
+      throw InputError(fmt::format("it ranked {} initial pairs, this input {}",
+                                   checkpoint.tried_initial_pairs.size(), tried_.size()));
+    }
+    std::optional<Random> random = Random::FromState(checkpoint.random_state);
+    if (!random) throw InputError("its random state is not one");
+    std::vector<ModelPtr> kept;
+    for (const MapperCheckpoint::Model& saved : checkpoint.kept) {
+      kept.push_back(std::make_unique<MapperState>(input_, options_));
+      kept.back()->Restore(saved);
+    }
+    ModelPtr grown;
+    if (checkpoint.growing) {
+      grown = std::make_unique<MapperState>(input_, options_);
+      grown->Restore(*checkpoint.growing);
+    }
+    loop_closer_.Restore(checkpoint);  // the last step that may throw
+    for (size_t m = 0; m < kept.size(); ++m) {
+      if (checkpoint.kept[m].merge_failures > 0) {
+        merge_failures_[kept[m].get()] = checkpoint.kept[m].merge_failures;
+      }
+      models_.push_back(std::move(kept[m]));
+    }
+    if (grown) {
+      if (checkpoint.growing->merge_failures > 0) {
+        merge_failures_[grown.get()] = checkpoint.growing->merge_failures;
+      }
+      *growing = std::move(grown);
+      growth_.failed_at.clear();
+      for (const auto& [id, count] : checkpoint.failed_at) growth_.failed_at[id] = count;
+      growth_.ever_failed.clear();
+      growth_.ever_failed.insert(checkpoint.ever_failed.begin(), checkpoint.ever_failed.end());
+      growth_.last_global_size = checkpoint.last_global_size;
+      growth_.refined_since_stall = checkpoint.refined_since_stall;
+      resume_growth_ = true;
+    }
+    tried_ = checkpoint.tried_initial_pairs;
+    random_ = *random;
+    report_ = checkpoint.report;
+    spdlog::info("mapper: going on from a checkpoint ({} frames registered in {} models{})",
+                 checkpoint.NumRegistered(), models_.size() + (*growing ? 1 : 0),
+                 checkpoint.finished ? ", mapping had finished" : "");
+    return checkpoint.finished;
+  }
+
+  void MaybeSaveCheckpoint(const MapperState& growing) {
+    if (!checkpointing_.save ||
+        last_checkpoint_.ElapsedSeconds() < checkpointing_.interval_seconds) {
+      return;
+    }
+    checkpointing_.save(Save(&growing, /*finished=*/false));
+    last_checkpoint_.Restart();
+  }
+
   // The first candidate pair of free frames whose two-view model passes validation.
-  ModelPtr StartModel(const std::vector<InitialPairCandidate>& candidates, std::vector<char>* tried) {
+  ModelPtr StartModel(const std::vector<InitialPairCandidate>& candidates) {
     int trials = 0;
     for (size_t c = 0; c < candidates.size() && trials < options_.init_max_trials; ++c) {
-      if ((*tried)[c]) continue;
+      if (tried_[c]) continue;
       const ImagePair& pair = candidates[c].pair->pair;
       if (RegisteredInKeptModel(pair.image_id1) || RegisteredInKeptModel(pair.image_id2)) continue;
-      (*tried)[c] = 1;
+      tried_[c] = 1;
       ++trials;
       auto model = std::make_unique<MapperState>(input_, options_);
       if (!InitializeModel(*model, candidates[c], &report_)) continue;
@@ -212,13 +318,11 @@ class IncrementalMapper {
   }
 
   void GrowUntilStalled(ModelPtr& model) {
-    // Visible tracks of each frame when it last failed to register.
-    std::unordered_map<image_t, size_t> failed_at;
-    // Frames that failed at least once (for the report; failed_at is cleared on refinement).
-    std::unordered_set<image_t> ever_failed;
-    size_t last_global_size = model->reconstruction().NumRegImages();
-    bool refined_since_stall = false;
+    if (!resume_growth_) growth_ = {{}, {}, model->reconstruction().NumRegImages(), false};
+    resume_growth_ = false;
+    auto& [failed_at, ever_failed, last_global_size, refined_since_stall] = growth_;
     while (true) {
+      MaybeSaveCheckpoint(*model);
       Reconstruction& rec = model->reconstruction();
       std::vector<std::pair<size_t, image_t>> order;
       for (const auto& [id, count] : model->CountVisibleTracks()) {
@@ -305,14 +409,30 @@ class IncrementalMapper {
     }
   }
 
+  // Where the growth of a model stands between two registrations.
+  struct Growth {
+    // Visible tracks of each frame when it last failed to register.
+    std::unordered_map<image_t, size_t> failed_at;
+    // Frames that failed at least once (for the report; failed_at is cleared on refinement).
+    std::unordered_set<image_t> ever_failed;
+    size_t last_global_size = 0;
+    bool refined_since_stall = false;
+  };
+
   const MapperInput& input_;
   const IncrementalMapperOptions& options_;
   MapperReport& report_;
   MapperProgress progress_;
+  const MapperCheckpointing& checkpointing_;
   Random random_;
   LoopCloser loop_closer_;
   std::vector<ModelPtr> models_;
   std::unordered_map<const MapperState*, int> merge_failures_;
+  std::vector<char> tried_;
+  Growth growth_;
+  // The next GrowUntilStalled goes on from a restored growth_ instead of starting afresh.
+  bool resume_growth_ = false;
+  Timer last_checkpoint_;
 };
 
 }  // namespace
@@ -320,12 +440,13 @@ class IncrementalMapper {
 std::vector<Reconstruction> RunIncrementalMapper(const MapperInput& input,
                                                  const IncrementalMapperOptions& options,
                                                  MapperReport* report,
-                                                 const MapperProgress& progress) {
+                                                 const MapperProgress& progress,
+                                                 const MapperCheckpointing& checkpointing) {
   options.Check();
   MapperReport local;
   MapperReport* out = report ? report : &local;
   if (!options.loop_closure.withhold_loop_pairs) {
-    IncrementalMapper mapper(input, options, out, progress);
+    IncrementalMapper mapper(input, options, out, progress, checkpointing);
     return mapper.Run();
   }
   const MapperInput withheld = WithoutLoopPairs(input, options.loop_closure.min_frame_gap);
@@ -335,7 +456,7 @@ std::vector<Reconstruction> RunIncrementalMapper(const MapperInput& input,
   IncrementalMapperOptions mapping = options;
   mapping.loop_closure.withhold_loop_pairs = false;
   mapping.loop_closure.method = LoopClosingMethod::kNone;  // no loop pairs to close yet
-  IncrementalMapper mapper(withheld, mapping, out, progress);
+  IncrementalMapper mapper(withheld, mapping, out, progress, checkpointing);
   std::vector<Reconstruction> models = mapper.Run();
   if (!models.empty()) models[0] = CloseLoopsAfterMapping(input, models[0], options, out);
   return models;

@@ -17,6 +17,7 @@
 //   (model_merger.h). A grown model too small to keep is discarded and its frames stay
 //   free for later models. Only what has no link stays a separate model.
 
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -226,10 +227,23 @@ struct MapperReport {
 // Called after each registration with (registered in this model, frames in all).
 using MapperProgress = std::function<void(size_t, size_t)>;
 
-// Models sorted by size, largest first.
+struct MapperCheckpoint;  // mapper_checkpoint.h
+
+struct MapperCheckpointing {
+  // Called with the mapper's state every `interval_seconds` of mapping (between two
+  // registrations; 0: before every registration), and once when mapping has finished.
+  std::function<void(const MapperCheckpoint&)> save;
+  double interval_seconds = 60.0;
+  // Where to go on from; null: from the start.
+  const MapperCheckpoint* resume = nullptr;
+};
+
+// Models sorted by size, largest first. With `checkpointing`, the state is handed out now
+// and then, and mapping may go on from a saved state (mapper_checkpoint.h).
 std::vector<Reconstruction> RunIncrementalMapper(const MapperInput& input,
                                                  const IncrementalMapperOptions& options,
                                                  MapperReport* report,
-                                                 const MapperProgress& progress = {});
+                                                 const MapperProgress& progress = {},
+                                                 const MapperCheckpointing& checkpointing = {});
 
 }  // namespace loopsfm

@@ -100,6 +100,20 @@ LoopCloser::LoopCloser(const MapperInput& input, const LoopClosureOptions& optio
   }
 }
 
+void LoopCloser::Save(MapperCheckpoint* checkpoint) const {
+  checkpoint->loop_random_state = random_.State();
+  checkpoint->loop_window.assign(window_.begin(), window_.end());
+  checkpoint->loop_cooldown = cooldown_;
+}
+
+void LoopCloser::Restore(const MapperCheckpoint& checkpoint) {
+  std::optional<Random> random = Random::FromState(checkpoint.loop_random_state);
+  if (!random) throw InputError("the loop closer's saved random state is not one");
+  random_ = *random;
+  window_.assign(checkpoint.loop_window.begin(), checkpoint.loop_window.end());
+  cooldown_ = checkpoint.loop_cooldown;
+}
+
 LoopCloser::Evidence LoopCloser::CollectEvidence(const MapperState& model,
                                                  image_t image_id) const {
   const Reconstruction& rec = model.reconstruction();

@@ -28,6 +28,7 @@
 
 #include "loopsfm/math/random.h"
 #include "loopsfm/sfm/incremental_mapper.h"
+#include "loopsfm/sfm/mapper_checkpoint.h"
 #include "loopsfm/sfm/point_alignment.h"
 
 namespace loopsfm {
@@ -81,6 +82,11 @@ class LoopCloser {
   // refinement). Returns true when it did. Draws from its own random numbers, so a mapping
   // where no loop is closed is the same as one without loop closing.
   bool AfterRegistration(MapperState& model, image_t image_id, MapperReport* report);
+
+  // Its state between registrations (random numbers, evidence window, cooldown), into and
+  // from a mapper checkpoint. Restore throws InputError for a state that is not one.
+  void Save(MapperCheckpoint* checkpoint) const;
+  void Restore(const MapperCheckpoint& checkpoint);
 
  private:
   struct Evidence {

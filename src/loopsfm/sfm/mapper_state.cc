@@ -53,6 +53,20 @@ std::vector<point3D_t> MapperState::PointsOfTrack(int track) const {
   return points;
 }
 
+MapperCheckpoint::Model MapperState::Save() const {
+  return {reconstruction_.SaveMapped(), gauge1_, gauge2_, 0};
+}
+
+void MapperState::Restore(const MapperCheckpoint::Model& saved) {
+  reconstruction_.RestoreMapped(saved.state);
+  for (const image_t id : {saved.gauge1, saved.gauge2}) {
+    if (!reconstruction_.ExistsImage(id) || !reconstruction_.IsRegistered(id)) {
+      throw InputError(fmt::format("saved gauge frame {} is not registered in its model", id));
+    }
+  }
+  SetGauge(saved.gauge1, saved.gauge2);
+}
+
 void MapperState::SetGauge(image_t first, image_t second) {
   gauge1_ = first;
   gauge2_ = second;

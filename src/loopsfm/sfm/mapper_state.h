@@ -18,6 +18,7 @@
 #include "loopsfm/math/random.h"
 #include "loopsfm/scene/reconstruction.h"
 #include "loopsfm/sfm/incremental_mapper.h"
+#include "loopsfm/sfm/mapper_checkpoint.h"
 
 namespace loopsfm {
 
@@ -42,6 +43,11 @@ class MapperState {
   void SetGauge(image_t first, image_t second);
   image_t GaugeFirst() const { return gauge1_; }
   image_t GaugeSecond() const { return gauge2_; }
+
+  // The model's state for a checkpoint (merge failures are the mapper's, left 0), and a
+  // model restored from one (throws InputError when it does not fit the input).
+  MapperCheckpoint::Model Save() const;
+  void Restore(const MapperCheckpoint::Model& saved);
 
   // --- Structure ---------------------------------------------------------------------
   // Triangulates, extends or merges every track seen by the image (after it was

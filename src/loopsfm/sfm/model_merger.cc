@@ -16,7 +16,8 @@ std::vector<PointCorrespondence> CommonTrackPoints(const MapperState& dst, const
   const Reconstruction& d = dst.reconstruction();
   const Reconstruction& s = src.reconstruction();
   std::vector<PointCorrespondence> correspondences;
-  for (const auto& [id, point] : s.Points3D()) {
+  for (const point3D_t id : s.Point3DIds()) {
+    const Point3D& point = s.GetPoint3D(id);
     const int track = src.TrackOfPoint(id);
     for (point3D_t other : dst.PointsOfTrack(track)) {
       const Point3D& q = d.GetPoint3D(other);
@@ -57,7 +58,8 @@ ModelMergeReport MergeModels(MapperState& dst, const MapperState& src, Random& r
   }
   // Points: observations the destination has no point for join a point of their track they
   // fit, or make a point of their own.
-  for (const auto& [id, point] : s.Points3D()) {
+  for (const point3D_t id : s.Point3DIds()) {
+    const Point3D& point = s.GetPoint3D(id);
     std::vector<TrackElement> free;
     for (const TrackElement& el : point.track.elements) {
       if (!d.GetImage(el.image_id).points2D[el.point2D_idx].HasPoint3D()) free.push_back(el);

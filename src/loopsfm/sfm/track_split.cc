@@ -54,7 +54,7 @@ int CloseLoopsBySplitTracks(MapperState& model, const LoopClosureOptions& option
   const int gap = options.min_frame_gap;
   std::map<std::pair<int, int>, std::vector<SplitPair>> groups;
   std::unordered_set<int> tracks_done;
-  for (const auto& [id, point] : rec.Points3D()) {
+  for (const point3D_t id : rec.Point3DIds()) {
     const int track = model.TrackOfPoint(id);
     if (track < 0 || !tracks_done.insert(track).second) continue;
     const std::vector<point3D_t> points = model.PointsOfTrack(track);

@@ -1,0 +1,454 @@
+#include "loopsfm/pipeline/mapper_checkpoint.h"
+
+#include <cstring>
+#include <fstream>
+#include <iterator>
+#include <type_traits>
+
+#include "loopsfm/util/errors.h"
+#include "loopsfm/util/logging.h"
+
+namespace loopsfm {
+namespace fs = std::filesystem;
+namespace {
+
+constexpr char kMagic[] = "loopsfm mapper checkpoint\n";
+constexpr uint32_t kVersion = 1;
+
+// FNV-1a over the bytes of what mapping reads.
+class Digest {
+ public:
+  void Add(const void* data, size_t size) {
+    const auto* bytes = static_cast<const unsigned char*>(data);
+    for (size_t i = 0; i < size; ++i) hash_ = (hash_ ^ bytes[i]) * 0x100000001b3ull;
+  }
+  template <typename T>
+  void Add(const T& value) {
+    static_assert(std::is_trivially_copyable_v<T>);
+    Add(&value, sizeof(T));
+  }
+  template <typename T>
+  void AddAll(const std::vector<T>& values) {
+    Add(values.size());
+    if (!values.empty()) Add(values.data(), values.size() * sizeof(T));
+  }
+  void Add(const std::string& text) {
+    Add(text.size());
+    Add(text.data(), text.size());
+  }
+  std::string Hex() const { return fmt::format("{:016x}", hash_); }
+
+ private:
+  uint64_t hash_ = 0xcbf29ce484222325ull;
+};
+
+std::string InputDigest(const MapperInput& input) {
+  Digest digest;
+  for (const Camera& camera : input.cameras) {
+    digest.Add(camera.camera_id);
+    digest.Add(static_cast<int>(camera.model_id));
+    digest.Add(camera.width);
+    digest.Add(camera.height);
+    digest.AddAll(camera.params);
+    digest.Add(camera.has_prior_focal_length);
+  }
+  for (const MapperFrame& frame : input.frames) {
+    digest.Add(frame.image_id);
+    digest.Add(frame.camera_id);
+    digest.Add(frame.name);
+    digest.Add(frame.points2D.size());
+    digest.Add(frame.points2D.data(), frame.points2D.size() * sizeof(Eigen::Vector2d));
+  }
+  for (const MapperPair& pair : input.pairs) {
+    digest.Add(pair.pair.image_id1);
+    digest.Add(pair.pair.image_id2);
+    digest.Add(pair.geometry.config);
+    digest.AddAll(pair.geometry.inlier_matches);
+  }
+  for (const Track& track : input.tracks) digest.AddAll(track.elements);
+  return digest.Hex();
+}
+
+nlohmann::json RefinementJson(const IntrinsicsRefinement& refine) { return refine.ToString(); }
+
+// Every option that changes what the mapper does (the thread count only changes rounding).
+nlohmann::json OptionsJson(const IncrementalMapperOptions& o) {
+  const LoopClosureOptions& l = o.loop_closure;
+  return {
+      {"init", {o.init_min_num_inliers, o.init_max_h_inlier_ratio, o.init_min_tri_angle_deg,
+                o.init_min_num_points, o.init_max_trials}},
+      {"registration", {o.abs_pose_max_error_px, o.abs_pose_min_num_inliers,
+                        o.abs_pose_min_inlier_ratio, o.registration_retry_growth,
+                        o.record_alternate_poses}},
+      {"structure", {o.max_reproj_error_px, o.min_tri_angle_deg}},
+      {"bundles", {o.local_ba_num_images, o.global_ba_growth, RefinementJson(o.refine_unknown),
+                   RefinementJson(o.refine_known), o.focal_prior_sigma_log}},
+      {"models", {o.max_num_models, o.min_model_size, o.merge_max_reproj_error_px,
+                  o.merge_min_num_inliers, o.merge_min_inlier_ratio}},
+      {"loop_closure",
+       {static_cast<int>(l.method), l.withhold_loop_pairs, l.min_frame_gap,
+        l.min_frame_correspondences, l.num_consistent, l.min_frame_inliers, l.min_num_inliers,
+        l.min_inlier_ratio, l.max_reproj_error_px, l.max_correction_fraction_of_path,
+        l.max_correction_scale, l.covisibility_min_points, l.loop_edge_weight, l.split_weight}},
+      {"seed", o.seed},
+  };
+}
+
+// ---- binary models -------------------------------------------------------------------
+
+class Writer {
+ public:
+  explicit Writer(std::ofstream& out) : out_(out) {}
+  template <typename T>
+  void Put(const T& value) {
+    static_assert(std::is_trivially_copyable_v<T>);
+    out_.write(reinterpret_cast<const char*>(&value), sizeof(T));
+  }
+  void PutBytes(const void* data, size_t size) {
+    out_.write(static_cast<const char*>(data), static_cast<std::streamsize>(size));
+  }
+
+ private:
+  std::ofstream& out_;
+};
+
+// Reads from a buffer, throwing InputError instead of reading past its end.
+class Reader {
+ public:
+  Reader(const std::string& bytes, size_t offset) : bytes_(bytes), offset_(offset) {}
+  template <typename T>
+  T Get() {
+    static_assert(std::is_trivially_copyable_v<T>);
+    T value;
+    GetBytes(&value, sizeof(T));
+    return value;
+  }
+  void GetBytes(void* data, size_t size) {
+    if (size > bytes_.size() - offset_) throw InputError("it ends early");
+    std::memcpy(data, bytes_.data() + offset_, size);
+    offset_ += size;
+  }
+  // A count of items of `item_size` bytes each, checked against the bytes left.
+  uint64_t GetCount(size_t item_size) {
+    const uint64_t count = Get<uint64_t>();
+    if (count > (bytes_.size() - offset_) / std::max<size_t>(item_size, 1)) {
+      throw InputError(fmt::format("it claims {} items where {} bytes are left", count,
+                                   bytes_.size() - offset_));
+    }
+    return count;
+  }
+  size_t Offset() const { return offset_; }
+  bool AtEnd() const { return offset_ == bytes_.size(); }
+
+ private:
+  const std::string& bytes_;
+  size_t offset_;
+};
+
+void PutPose(Writer& w, const Rigid3d& pose) {
+  w.PutBytes(pose.rotation.coeffs().data(), 4 * sizeof(double));
+  w.PutBytes(pose.translation.data(), 3 * sizeof(double));
+}
+
+Rigid3d GetPose(Reader& r) {
+  Rigid3d pose;
+  r.GetBytes(pose.rotation.coeffs().data(), 4 * sizeof(double));
+  r.GetBytes(pose.translation.data(), 3 * sizeof(double));
+  return pose;
+}
+
+void PutMappedState(Writer& w, const MappedState& state) {
+  w.Put<uint64_t>(state.cameras.size());
+  for (const Camera& camera : state.cameras) {
+    w.Put<uint32_t>(camera.camera_id);
+    w.Put<int32_t>(static_cast<int32_t>(camera.model_id));
+    w.Put<int32_t>(camera.width);
+    w.Put<int32_t>(camera.height);
+    w.Put<uint8_t>(camera.has_prior_focal_length ? 1 : 0);
+    w.Put<uint64_t>(camera.params.size());
+    w.PutBytes(camera.params.data(), camera.params.size() * sizeof(double));
+  }
+  w.Put<uint64_t>(state.registered.size());
+  for (const MappedState::RegisteredImage& image : state.registered) {
+    w.Put<uint32_t>(image.image_id);
+    PutPose(w, image.cam_from_world);
+  }
+  w.Put<uint64_t>(state.next_point3D_id);
+  w.Put<uint64_t>(state.points.size());
+  for (const MappedState::SavedPoint& point : state.points) {
+    w.Put<uint64_t>(point.point3D_id);
+    w.PutBytes(point.xyz.data(), 3 * sizeof(double));
+    w.PutBytes(point.color.data(), 3);
+    w.Put<double>(point.error);
+    w.Put<uint64_t>(point.track.size());
+    for (const TrackElement& el : point.track) {
+      w.Put<uint32_t>(el.image_id);
+      w.Put<uint32_t>(el.point2D_idx);
+    }
+  }
+}
+
+MappedState GetMappedState(Reader& r) {
+  MappedState state;
+  state.cameras.resize(r.GetCount(25));
+  for (Camera& camera : state.cameras) {
+    camera.camera_id = r.Get<uint32_t>();
+    camera.model_id = static_cast<CameraModelId>(r.Get<int32_t>());
+    camera.width = r.Get<int32_t>();
+    camera.height = r.Get<int32_t>();
+    camera.has_prior_focal_length = r.Get<uint8_t>() != 0;
+    camera.params.resize(r.GetCount(sizeof(double)));
+    r.GetBytes(camera.params.data(), camera.params.size() * sizeof(double));
+  }
+  state.registered.resize(r.GetCount(4 + 7 * sizeof(double)));
+  for (MappedState::RegisteredImage& image : state.registered) {
+    image.image_id = r.Get<uint32_t>();
+    image.cam_from_world = GetPose(r);
+  }
+  state.next_point3D_id = r.Get<uint64_t>();
+  state.points.resize(r.GetCount(8 + 3 * sizeof(double) + 3 + sizeof(double) + 8));
+  for (MappedState::SavedPoint& point : state.points) {
+    point.point3D_id = r.Get<uint64_t>();
+    r.GetBytes(point.xyz.data(), 3 * sizeof(double));
+    r.GetBytes(point.color.data(), 3);
+    point.error = r.Get<double>();
+    point.track.resize(r.GetCount(8));
+    for (TrackElement& el : point.track) {
+      el.image_id = r.Get<uint32_t>();
+      el.point2D_idx = r.Get<uint32_t>();
+    }
+  }
+  return state;
+}
+
+// ---- JSON header ---------------------------------------------------------------------
+
+nlohmann::json PoseJson(const Rigid3d& pose) {
+  const auto& q = pose.rotation.coeffs();
+  const auto& t = pose.translation;
+  return {q[0], q[1], q[2], q[3], t[0], t[1], t[2]};
+}
+
+Rigid3d PoseFromJson(const nlohmann::json& j) {
+  const std::vector<double> v = j.get<std::vector<double>>();
+  if (v.size() != 7) throw InputError("a pose is not 7 numbers");
+  Rigid3d pose;
+  pose.rotation.coeffs() << v[0], v[1], v[2], v[3];
+  pose.translation << v[4], v[5], v[6];
+  return pose;
+}
+
+nlohmann::json ReportJson(const MapperReport& r) {
+  nlohmann::json loops = nlohmann::json::array();
+  for (const ClosedLoop& l : r.loops_closed) {
+    loops.push_back({l.recent_frame, l.old_frame, l.num_correspondences, l.num_inliers,
+                     l.correction_translation, l.correction_fraction_of_path,
+                     l.correction_rotation_deg, l.correction_scale, l.num_points_before,
+                     l.num_points_after, l.seconds});
+  }
+  nlohmann::json path = nlohmann::json::array();
+  for (const TrajectoryEntry& e : r.path_before_loop_closing) {
+    path.push_back({e.name, PoseJson(e.world_from_cam)});
+  }
+  nlohmann::json registrations = nlohmann::json::array();
+  for (const RegistrationRounds& g : r.registrations) {
+    registrations.push_back({g.frame, g.num_correspondences, g.num_inliers,
+                             g.second_num_correspondences, g.second_num_inliers,
+                             g.second_pose_found, g.second_centre_distance,
+                             g.second_rotation_deg});
+  }
+  return {
+      {"counts", {r.num_models, r.num_registered, r.num_init_trials, r.num_init_accepted,
+                  r.num_registered_on_retry, r.num_models_merged, r.num_models_discarded,
+                  r.num_local_ba, r.num_global_ba, r.num_local_ba_iterations,
+                  r.num_local_ba_residuals, r.num_global_ba_iterations,
+                  r.num_global_ba_residuals, r.num_failed_bundles, r.num_loops_refused,
+                  r.num_split_groups, r.num_split_groups_refused, r.num_split_pairs}},
+      {"seconds", {r.seconds_registration, r.seconds_triangulation, r.seconds_local_ba,
+                   r.seconds_global_ba, r.seconds_merging, r.seconds_loop_detection,
+                   r.seconds_loop_closing, r.seconds_split}},
+      {"loops_closed", loops},
+      {"path_before_loop_closing", path},
+      {"registrations", registrations},
+  };
+}
+
+MapperReport ReportFromJson(const nlohmann::json& j) {
+  MapperReport r;
+  const nlohmann::json& c = j.at("counts");
+  if (c.size() != 18) throw InputError("the report's counts are not 18 numbers");
+  int k = 0;
+  for (int* field : {&r.num_models, &r.num_registered, &r.num_init_trials, &r.num_init_accepted,
+                     &r.num_registered_on_retry, &r.num_models_merged, &r.num_models_discarded,
+                     &r.num_local_ba, &r.num_global_ba}) {
+    *field = c.at(k++).get<int>();
+  }
+  for (long long* field : {&r.num_local_ba_iterations, &r.num_local_ba_residuals,
+                           &r.num_global_ba_iterations, &r.num_global_ba_residuals}) {
+    *field = c.at(k++).get<long long>();
+  }
+  for (int* field : {&r.num_failed_bundles, &r.num_loops_refused, &r.num_split_groups,
+                     &r.num_split_groups_refused, &r.num_split_pairs}) {
+    *field = c.at(k++).get<int>();
+  }
+  const nlohmann::json& s = j.at("seconds");
+  k = 0;
+  for (double* field : {&r.seconds_registration, &r.seconds_triangulation, &r.seconds_local_ba,
+                        &r.seconds_global_ba, &r.seconds_merging, &r.seconds_loop_detection,
+                        &r.seconds_loop_closing, &r.seconds_split}) {
+    *field = s.at(k++).get<double>();
+  }
+  for (const nlohmann::json& l : j.at("loops_closed")) {
+    r.loops_closed.push_back({l.at(0).get<std::string>(), l.at(1).get<std::string>(),
+                              l.at(2).get<int>(), l.at(3).get<int>(), l.at(4).get<double>(),
+                              l.at(5).get<double>(), l.at(6).get<double>(), l.at(7).get<double>(),
+                              l.at(8).get<long long>(), l.at(9).get<long long>(),
+                              l.at(10).get<double>()});
+  }
+  for (const nlohmann::json& e : j.at("path_before_loop_closing")) {
+    r.path_before_loop_closing.push_back({e.at(0).get<std::string>(), PoseFromJson(e.at(1))});
+  }
+  for (const nlohmann::json& g : j.at("registrations")) {
+    r.registrations.push_back({g.at(0).get<std::string>(), g.at(1).get<int>(), g.at(2).get<int>(),
+                               g.at(3).get<int>(), g.at(4).get<int>(), g.at(5).get<bool>(),
+                               g.at(6).get<double>(), g.at(7).get<double>()});
+  }
+  return r;
+}
+
+nlohmann::json ModelJson(const MapperCheckpoint::Model& model) {
+  return {{"gauge", {model.gauge1, model.gauge2}}, {"merge_failures", model.merge_failures}};
+}
+
+MapperCheckpoint::Model ModelFromJson(const nlohmann::json& j) {
+  MapperCheckpoint::Model model;
+  model.gauge1 = j.at("gauge").at(0).get<image_t>();
+  model.gauge2 = j.at("gauge").at(1).get<image_t>();
+  model.merge_failures = j.at("merge_failures").get<int>();
+  return model;
+}
+
+nlohmann::json HeaderJson(const MapperCheckpoint& c, const nlohmann::json& fingerprint) {
+  nlohmann::json kept = nlohmann::json::array();
+  for (const MapperCheckpoint::Model& model : c.kept) kept.push_back(ModelJson(model));
+  std::string tried;
+  for (const char t : c.tried_initial_pairs) tried += t ? '1' : '0';
+  return {
+      {"fingerprint", fingerprint},
+      {"finished", c.finished},
+      {"kept", kept},
+      {"growing", c.growing ? ModelJson(*c.growing) : nlohmann::json()},
+      {"failed_at", c.failed_at},
+      {"ever_failed", c.ever_failed},
+      {"last_global_size", c.last_global_size},
+      {"refined_since_stall", c.refined_since_stall},
+      {"tried_initial_pairs", tried},
+      {"random_state", c.random_state},
+      {"loop_random_state", c.loop_random_state},
+      {"loop_window", c.loop_window},
+      {"loop_cooldown", c.loop_cooldown},
+      {"report", ReportJson(c.report)},
+  };
+}
+
+MapperCheckpoint CheckpointFromHeader(const nlohmann::json& j) {
+  MapperCheckpoint c;
+  c.finished = j.at("finished").get<bool>();
+  for (const nlohmann::json& model : j.at("kept")) c.kept.push_back(ModelFromJson(model));
+  if (!j.at("growing").is_null()) c.growing = ModelFromJson(j.at("growing"));
+  c.failed_at = j.at("failed_at").get<std::vector<std::pair<image_t, uint64_t>>>();
+  c.ever_failed = j.at("ever_failed").get<std::vector<image_t>>();
+  c.last_global_size = j.at("last_global_size").get<uint64_t>();
+  c.refined_since_stall = j.at("refined_since_stall").get<bool>();
+  for (const char t : j.at("tried_initial_pairs").get<std::string>()) {
+    c.tried_initial_pairs.push_back(t == '1' ? 1 : 0);
+  }
+  c.random_state = j.at("random_state").get<std::string>();
+  c.loop_random_state = j.at("loop_random_state").get<std::string>();
+  c.loop_window = j.at("loop_window").get<std::vector<image_t>>();
+  c.loop_cooldown = j.at("loop_cooldown").get<int>();
+  c.report = ReportFromJson(j.at("report"));
+  return c;
+}
+
+// The checkpoint in `bytes`; throws InputError (or a JSON error) saying what is wrong.
+MapperCheckpoint ParseCheckpoint(const std::string& bytes, const nlohmann::json& fingerprint,
+                                 bool* other_fingerprint) {
+  const size_t magic_size = sizeof(kMagic) - 1;
+  if (bytes.compare(0, magic_size, kMagic) != 0) throw InputError("it is not a checkpoint");
+  Reader reader(bytes, magic_size);
+  const uint32_t version = reader.Get<uint32_t>();
+  if (version != kVersion) {
+    throw InputError(fmt::format("it has version {}, this loopsfm writes {}", version, kVersion));
+  }
+  std::string header(reader.GetCount(1), '\0');
+  reader.GetBytes(header.data(), header.size());
+  const nlohmann::json j = nlohmann::json::parse(header);
+  if (j.at("fingerprint") != fingerprint) {
+    *other_fingerprint = true;
+    return {};
+  }
+  MapperCheckpoint checkpoint = CheckpointFromHeader(j);
+  for (MapperCheckpoint::Model& model : checkpoint.kept) model.state = GetMappedState(reader);
+  if (checkpoint.growing) checkpoint.growing->state = GetMappedState(reader);
+  if (!reader.AtEnd()) throw InputError("it has bytes after its last model");
+  return checkpoint;
+}
+
+}  // namespace
+
+nlohmann::json MapperCheckpointFingerprint(const MapperInput& input,
+                                           const IncrementalMapperOptions& options) {
+  return {{"input", InputDigest(input)}, {"options", OptionsJson(options)}};
+}
+
+void WriteMapperCheckpoint(const fs::path& path, const MapperCheckpoint& checkpoint,
+                           const nlohmann::json& fingerprint) {
+  const fs::path partial = fs::path(path.string() + ".partial");
+  {
+    std::ofstream out(partial, std::ios::binary | std::ios::trunc);
+    if (!out) {
+      throw StorageError(fmt::format("cannot write the mapping checkpoint '{}': check that the "
+                                     "folder is writable", partial.string()));
+    }
+    Writer writer(out);
+    writer.PutBytes(kMagic, sizeof(kMagic) - 1);
+    writer.Put<uint32_t>(kVersion);
+    const std::string header = HeaderJson(checkpoint, fingerprint).dump();
+    writer.Put<uint64_t>(header.size());
+    writer.PutBytes(header.data(), header.size());
+    for (const MapperCheckpoint::Model& model : checkpoint.kept) PutMappedState(writer, model.state);
+    if (checkpoint.growing) PutMappedState(writer, checkpoint.growing->state);
+    out.close();
+    if (!out) {
+      throw StorageError(fmt::format("writing the mapping checkpoint '{}' failed (disk full?)",
+                                     partial.string()));
+    }
+  }
+  std::error_code ec;
+  fs::rename(partial, path, ec);
+  if (ec) {
+    throw StorageError(fmt::format("cannot replace the mapping checkpoint '{}': {}", path.string(),
+                                   ec.message()));
+  }
+}
+
+std::optional<MapperCheckpoint> ReadMapperCheckpoint(const fs::path& path,
+                                                     const nlohmann::json& fingerprint) {
+  if (!fs::exists(path)) return std::nullopt;
+  std::ifstream in(path, std::ios::binary);
+  const std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  bool other_fingerprint = false;
+  try {
+    MapperCheckpoint checkpoint = ParseCheckpoint(bytes, fingerprint, &other_fingerprint);
+    if (!other_fingerprint) return checkpoint;
+    spdlog::info("the mapping checkpoint '{}' was made from other matches or with other mapper "
+                 "options; mapping starts from the beginning", path.string());
+  } catch (const std::exception& e) {  // InputError, or nlohmann::json's errors
+    spdlog::warn("cannot use the mapping checkpoint '{}' ({}); mapping starts from the beginning",
+                 path.string(), e.what());
+  }
+  return std::nullopt;
+}
+
+}  // namespace loopsfm
