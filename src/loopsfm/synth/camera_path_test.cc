@@ -11,6 +11,7 @@
 #include "loopsfm/synth/render.h"
 #include "loopsfm/synth/synth_test_util.h"
 #include "loopsfm/synth/synthetic_scene.h"
+#include "loopsfm/util/errors.h"
 
 namespace loopsfm {
 namespace {
@@ -239,6 +240,27 @@ TEST(StreetScene, LapsAndRevisitSetTheLengthOfTheWalk) {
   EXPECT_NEAR(end.y(), -6.0 + s, 1e-9);
 }
 
+
+TEST(StreetScene, PanTurnsOnTheSpotFromLeftToRight) {
+  SynthOptions options;
+  options.scene = "street";
+  options.street_route = "pan";
+  options.num_frames = 41;
+  const SyntheticScene scene = MakeScene(options);
+  // Standing 6 m in front of the middle of block A's south side (y = -6), at eye height.
+  for (const Rigid3d& pose : scene.world_from_cam) {
+    EXPECT_LT((pose.translation - Eigen::Vector3d(0.0, -12.0, 1.6)).norm(), 1e-9);
+  }
+  // Facing the block (north, 90 degrees) in the middle; 60 degrees to the left at the start,
+  // 60 to the right at the end, turning the same way by 3 degrees a frame.
+  EXPECT_NEAR(Heading(scene.world_from_cam[20]), 90.0, 1e-9);
+  EXPECT_NEAR(Heading(scene.world_from_cam.front()), 150.0, 1e-9);
+  EXPECT_NEAR(Heading(scene.world_from_cam.back()), 30.0, 1e-9);
+  for (const double change : HeadingChanges(scene)) EXPECT_NEAR(change, -3.0, 1e-9);
+
+  options.street_look_ahead_degrees = 30.0;
+  EXPECT_THROW(options.Check(), InvalidArgument);
+}
 // Hand-held shake: a smooth random rotation and offset in camera axes with the requested
 // standard deviations, seeded, and part of the poses (so of the ground truth).
 TEST(CameraShake, HasTheRequestedStatisticsAndIsSmooth) {

@@ -6,7 +6,8 @@
 // around block B, A's mirror image across the street east of A, clockwise: that street is
 // 2 * kStreetStandoff wide, so the loops around A and B share its centre line, walked north
 // in both. The camera films the block it walks around, so at the two corners where the route
-// passes from one loop to the other the view swings the other way to the path.
+// passes from one loop to the other the view swings the other way to the path. The "pan"
+// route does not walk: the camera stands where the walk would start and turns on the spot.
 
 #include <algorithm>
 #include <array>
@@ -25,6 +26,8 @@ constexpr double kStreetStandoff = 6.0;
 constexpr double kStreetWidth = 16.0;
 constexpr double kEyeHeight = 1.6;
 constexpr double kStreetPitchDegrees = 10.0;
+// The "pan" route turns the view on the spot by this much (no baseline at all).
+constexpr double kPanDegrees = 120.0;
 // The loop around block B is the mirror image of the loop around A across x = kMirrorX, the
 // centre line of the street between them.
 constexpr double kMirrorX = kBlockHalfX + kStreetStandoff;
@@ -237,11 +240,19 @@ Eigen::Vector2d ViewDirection(const LoopPoint& point, double look_ahead, bool ab
   return Rotate(from, walked * turn);
 }
 
-// Position and horizontal viewing direction at arc length u along the route.
+// Position and horizontal viewing direction at arc length u along the route; for "pan", at
+// the fraction u of the sweep.
 void StreetRoutePoint(const SynthOptions& options, double u, Eigen::Vector2d* position,
                       Eigen::Vector2d* view) {
   const double look_ahead = options.street_look_ahead_degrees * M_PI / 180.0;
   const bool abrupt = options.street_abrupt_turns;
+  if (options.street_route == "pan") {
+    // Where the walk would start, facing the block; the view turns from left to right.
+    const LoopPoint start = StreetLoopPoint(kBlockHalfX);
+    *position = start.position;
+    *view = Rotate(start.inward, (0.5 - u) * kPanDegrees * M_PI / 180.0);
+    return;
+  }
   if (options.street_route == "block") {
     const LoopPoint point = StreetLoopPoint(u);
     *position = point.position;
@@ -313,7 +324,9 @@ void BuildStreetScene(const SynthOptions& options, SyntheticScene* scene) {
   const double pitch = kStreetPitchDegrees * M_PI / 180.0;
   for (int i = 0; i < options.num_frames; ++i) {
     // Start in the middle of the south side of block A.
-    const double u = kBlockHalfX + PathFraction(i, options.num_frames) * length;
+    const double u = options.street_route == "pan"
+                         ? PathFraction(i, options.num_frames)
+                         : kBlockHalfX + PathFraction(i, options.num_frames) * length;
     Eigen::Vector2d position, view;
     StreetRoutePoint(options, u, &position, &view);
     const Eigen::Vector3d center(position.x(), position.y(), kEyeHeight);

@@ -64,8 +64,10 @@ struct SynthOptions {
   // Street scene: the buildings of each block are identical (one size, one material, the
   // texture anchored at each building's corner), so places far apart look the same.
   bool street_repeated_facades = false;
-  // Street scene: "block" (around one block, counter-clockwise) or "figure8" (around block A
-  // counter-clockwise, then around its neighbour B clockwise, filming the block walked around).
+  // Street scene: "block" (around one block, counter-clockwise), "figure8" (around block A
+  // counter-clockwise, then around its neighbour B clockwise, filming the block walked around)
+  // or "pan" (no walk: standing in front of block A, the view turns 120 degrees on the spot,
+  // left to right; laps and revisit do not apply).
   std::string street_route = "block";
   // Street scene: the view turned from the facade towards the walking direction, in degrees.
   double street_look_ahead_degrees = 0.0;
