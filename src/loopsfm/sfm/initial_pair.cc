@@ -4,6 +4,8 @@
 #include <cmath>
 #include <unordered_map>
 
+#include <Eigen/SVD>
+
 #include "loopsfm/sfm/mapper_state.h"
 #include "loopsfm/util/errors.h"
 #include "loopsfm/util/logging.h"
@@ -25,6 +27,56 @@ double HomographyInlierRatio(const MapperPair& pair, const MapperFrame& f1, cons
     }
   }
   return double(count) / inliers.size();
+}
+
+// Fraction of a pair's inliers that a pure rotation of the camera (no baseline) maps within
+// max_error pixels, at the best of focal lengths from half to twice the camera's (the focal
+// length may still be a guess). For each, the rotation that best aligns the inliers' viewing
+// rays (Kabsch), fitted again to those it maps within 8x, then 2x the threshold (a wrong match
+// among the inliers skews the first fit). Near 1 for a camera turning on the spot, where the
+// homography's decomposition under a wrong focal length finds a spurious translation and
+// triangulation angles of several degrees; low for a baseline seen in depth or in a plane's
+// perspective.
+double RotationInlierRatio(const MapperPair& pair, const Camera& c1, const Camera& c2,
+                           const MapperFrame& f1, const MapperFrame& f2, double max_error) {
+  const auto& inliers = pair.geometry.inlier_matches;
+  if (inliers.empty()) return 0.0;
+  std::vector<Eigen::Vector2d> xs1, xs2;  // normalised image points
+  for (const FeatureMatch& m : inliers) {
+    xs1.push_back(c1.CamFromImg(f1.points2D[m.point2D_idx1]));
+    xs2.push_back(c2.CamFromImg(f2.points2D[m.point2D_idx2]));
+  }
+  const double threshold = max_error / (0.5 * (c1.MeanFocalLength() + c2.MeanFocalLength()));
+  constexpr int kSteps = 24;  // focal lengths 6 % apart
+  size_t best = 0;
+  for (int step = 0; step <= kSteps; ++step) {
+    const double scale = std::pow(2.0, -1.0 + 2.0 * step / kSteps);  // trial focal / focal
+    auto ray = [&](const Eigen::Vector2d& x) {
+      return Eigen::Vector3d((x / scale).homogeneous().normalized());
+    };
+    std::vector<char> used(xs1.size(), 1);
+    size_t count = 0;
+    for (const double factor : {8.0, 2.0, 1.0}) {
+      Eigen::Matrix3d correlation = Eigen::Matrix3d::Zero();
+      for (size_t i = 0; i < xs1.size(); ++i) {
+        if (used[i]) correlation += ray(xs2[i]) * ray(xs1[i]).transpose();
+      }
+      const Eigen::JacobiSVD<Eigen::Matrix3d> svd(correlation,
+                                                  Eigen::ComputeFullU | Eigen::ComputeFullV);
+      Eigen::Matrix3d sign = Eigen::Matrix3d::Identity();
+      sign(2, 2) = (svd.matrixU() * svd.matrixV().transpose()).determinant() < 0 ? -1.0 : 1.0;
+      const Eigen::Matrix3d cam2_from_cam1 = svd.matrixU() * sign * svd.matrixV().transpose();
+      count = 0;
+      for (size_t i = 0; i < xs1.size(); ++i) {
+        const Eigen::Vector3d in_cam2 = cam2_from_cam1 * ray(xs1[i]);
+        used[i] = in_cam2.z() > 1e-12 &&
+                  (scale * in_cam2.hnormalized() - xs2[i]).norm() <= factor * threshold;
+        count += used[i];
+      }
+    }
+    best = std::max(best, count);
+  }
+  return double(best) / inliers.size();
 }
 
 struct AngleStats {
@@ -102,6 +154,13 @@ std::vector<InitialPairCandidate> RankInitialPairs(const MapperInput& input,
     c.median_tri_angle_deg = angles.median_deg;
     c.h_ratio = HomographyInlierRatio(pair, f1, f2, options.max_reproj_error_px);
     if (c.h_ratio > options.init_max_h_inlier_ratio) {
+      // Planar, or the camera only turned: a rotation explaining as much leaves no baseline
+      // to start from (COLMAP's panoramic pairs), and its two-view model is noise.
+      if (RotationInlierRatio(pair, *camera_of_id.at(f1.camera_id), *camera_of_id.at(f2.camera_id),
+                              f1, f2, options.max_reproj_error_px) >
+          options.init_max_h_inlier_ratio) {
+        continue;
+      }
       c.tier = 2;
     } else if (num_inliers >= options.init_min_num_inliers &&
                angles.num_well_conditioned >= options.init_min_num_points) {

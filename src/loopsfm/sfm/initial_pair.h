@@ -28,6 +28,7 @@ struct InitialPairCandidate {
   double h_ratio = 0.0;
   // Tiers, best first: 0 strict (enough inliers and well-conditioned inliers, not
   // planar), 1 relaxed (half the counts), 2 planar (homography ratio above the bound).
+  // Pairs that a pure rotation explains as well (a camera turning on the spot) are left out.
   int tier = 0;
 };
 
