@@ -1,6 +1,7 @@
 #include "loopsfm/cli/commands.h"
 #include "loopsfm/cli/stage_flags.h"
 #include "loopsfm/util/logging.h"
+#include "loopsfm/util/timer.h"
 #include "loopsfm/video/frame_source.h"
 
 namespace loopsfm::cli {
@@ -26,10 +27,10 @@ void AddExtractCommand(CLI::App& app) {
     const ExtractReport report = ExtractFeatures(flags->input, database, options);
     spdlog::info(
         "extract: {} frames ({} new, {} already stored), {} unreadable skipped, {} camera(s), "
-        "{:.0f} features/frame, {:.1f} frames/s, {:.1f} s",
+        "{:.0f} features/frame, {:.1f} frames/s, {:.1f} s, peak memory {:.0f} MiB",
         report.frames_decoded, report.frames_extracted, report.frames_resumed,
         report.unreadable_images, report.num_cameras, report.FeaturesPerFrame(),
-        report.FramesPerSecond(), report.seconds);
+        report.FramesPerSecond(), report.seconds, PeakResidentBytes() / (1024.0 * 1024.0));
   });
 }
 

@@ -25,6 +25,10 @@ void AddExtractFlags(CLI::App* cmd, ExtractFlags* flags) {
   cmd->add_option("--upscale", flags->options.sift.upscale,
                   "Upscale frames by this factor before SIFT (low-resolution video)")
       ->capture_default_str();
+  cmd->add_option("--max-image-size", flags->options.sift.max_image_size,
+                  "Downscale frames whose longer side is larger than this before SIFT (keypoints "
+                  "stay in the frame's pixels); bounds memory for 4K and 8K video")
+      ->capture_default_str();
   cmd->add_option("--max-features", flags->options.sift.max_features, "Most features per frame")
       ->capture_default_str();
   cmd->add_flag("--no-root-sift", flags->no_root_sift, "Plain L2-normalised SIFT descriptors");

@@ -1,6 +1,7 @@
 #include "loopsfm/feature/sift.h"
 
 #include <algorithm>
+#include <cmath>
 #include <numeric>
 
 #include <opencv2/features2d.hpp>
@@ -20,6 +21,8 @@ void SiftOptions::Check() const {
                          num_octave_layers);
   LOOPSFM_REQUIRE_OPTION(upscale >= 1.0 && upscale <= 4.0,
                          "--upscale must be between 1 and 4, got {}", upscale);
+  LOOPSFM_REQUIRE_OPTION(max_image_size >= 16, "--max-image-size must be at least 16, got {}",
+                         max_image_size);
 }
 
 FeatureDescriptors QuantizeDescriptors(const cv::Mat& float_descriptors, bool root_sift) {
@@ -45,17 +48,42 @@ FeatureDescriptors QuantizeDescriptors(const cv::Mat& float_descriptors, bool ro
   return out;
 }
 
+SiftInput PrepareSiftInput(const cv::Mat& image, const SiftOptions& options) {
+  SiftInput input;
+  if (image.channels() == 3) {
+    cv::cvtColor(image, input.grey, cv::COLOR_BGR2GRAY);
+  } else {
+    input.grey = image;
+  }
+  const int longer = std::max(image.cols, image.rows);
+  const double scale = std::min(options.upscale, double(options.max_image_size) / longer);
+  if (scale == 1.0) return input;
+  const cv::Size size(std::max(1, static_cast<int>(std::lround(scale * image.cols))),
+                      std::max(1, static_cast<int>(std::lround(scale * image.rows))));
+  cv::resize(input.grey, input.grey, size, 0, 0, scale > 1.0 ? cv::INTER_CUBIC : cv::INTER_AREA);
+  input.scale_x = double(size.width) / image.cols;
+  input.scale_y = double(size.height) / image.rows;
+  return input;
+}
+
 FeatureSet ExtractSift(const cv::Mat& image, const SiftOptions& options,
                        std::vector<Eigen::Matrix<uint8_t, 3, 1>>* colors) {
-  cv::Mat grey;
-  if (image.channels() == 3) {
-    cv::cvtColor(image, grey, cv::COLOR_BGR2GRAY);
-  } else {
-    grey = image;
+  FeatureSet features = ExtractSift(PrepareSiftInput(image, options), options);
+  if (colors && image.channels() == 3) {
+    colors->clear();
+    colors->reserve(features.keypoints.size());
+    for (const auto& kp : features.keypoints) {
+      const int col = std::clamp(static_cast<int>(kp.x), 0, image.cols - 1);
+      const int row = std::clamp(static_cast<int>(kp.y), 0, image.rows - 1);
+      const cv::Vec3b bgr = image.at<cv::Vec3b>(row, col);
+      colors->emplace_back(bgr[2], bgr[1], bgr[0]);
+    }
   }
-  if (options.upscale != 1.0) {
-    cv::resize(grey, grey, cv::Size(), options.upscale, options.upscale, cv::INTER_CUBIC);
-  }
+  return features;
+}
+
+FeatureSet ExtractSift(const SiftInput& input, const SiftOptions& options) {
+  const cv::Mat& grey = input.grey;
   // nfeatures = 0: detect all, then keep the strongest ourselves (OpenCV's own cap keeps
   // ties unpredictably and recomputes orientations).
   auto sift = cv::SIFT::create(0, options.num_octave_layers, options.contrast_threshold,
@@ -74,27 +102,20 @@ FeatureSet ExtractSift(const cv::Mat& image, const SiftOptions& options,
 
   FeatureSet features;
   features.keypoints.reserve(keypoints.size());
-  const float inv_scale = static_cast<float>(1.0 / options.upscale);
+  // OpenCV puts pixel centres on integers, COLMAP at +0.5, so pixel borders scale exactly.
+  const float inv_scale_x = static_cast<float>(1.0 / input.scale_x);
+  const float inv_scale_y = static_cast<float>(1.0 / input.scale_y);
+  const float inv_scale = static_cast<float>(1.0 / std::sqrt(input.scale_x * input.scale_y));
   for (const cv::KeyPoint& kp : keypoints) {
-    // OpenCV puts pixel centres on integers, COLMAP at +0.5; size is the diameter.
-    // OpenCV's angle is in degrees, clockwise in image coordinates (y down).
-    const float x = (kp.pt.x + 0.5f) * inv_scale;
-    const float y = (kp.pt.y + 0.5f) * inv_scale;
+    // size is the diameter. OpenCV's angle is in degrees, clockwise in image coordinates
+    // (y down).
+    const float x = (kp.pt.x + 0.5f) * inv_scale_x;
+    const float y = (kp.pt.y + 0.5f) * inv_scale_y;
     const float orientation = kp.angle * static_cast<float>(M_PI / 180.0);
     features.keypoints.push_back(
         FeatureKeypoint::FromScaleOrientation(x, y, 0.5f * kp.size * inv_scale, orientation));
   }
   features.descriptors = QuantizeDescriptors(descriptors, options.root_sift);
-  if (colors && image.channels() == 3) {
-    colors->clear();
-    colors->reserve(features.keypoints.size());
-    for (const auto& kp : features.keypoints) {
-      const int col = std::clamp(static_cast<int>(kp.x), 0, image.cols - 1);
-      const int row = std::clamp(static_cast<int>(kp.y), 0, image.rows - 1);
-      const cv::Vec3b bgr = image.at<cv::Vec3b>(row, col);
-      colors->emplace_back(bgr[2], bgr[1], bgr[0]);
-    }
-  }
   return features;
 }
 

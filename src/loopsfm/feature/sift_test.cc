@@ -2,6 +2,8 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
+
 #include <opencv2/imgproc.hpp>
 
 #include "loopsfm/util/errors.h"
@@ -84,6 +86,42 @@ TEST(Sift, UpscaleMapsKeypointsBackToOriginalPixels) {
     EXPECT_LE(kp.y, 160.0f);
   }
   options.upscale = 0.5;
+  EXPECT_THROW(options.Check(), InvalidArgument);
+}
+
+TEST(Sift, LargeFramesAreDownscaledToMaxImageSizeAndKeypointsMappedBack) {
+  // A 1600 x 1200 frame with max_image_size 400 gives the features of the frame shrunk to
+  // 400 x 300, keypoints four times as far from the origin (pixel borders scale exactly).
+  const cv::Mat large = Texture(1600, 1200);
+  SiftOptions options;
+  options.max_image_size = 400;
+  const SiftInput input = PrepareSiftInput(large, options);
+  EXPECT_EQ(input.grey.cols, 400);
+  EXPECT_EQ(input.grey.rows, 300);
+  EXPECT_DOUBLE_EQ(input.scale_x, 0.25);
+  EXPECT_DOUBLE_EQ(input.scale_y, 0.25);
+  const FeatureSet from_large = ExtractSift(large, options);
+
+  cv::Mat grey, small;
+  cv::cvtColor(large, grey, cv::COLOR_BGR2GRAY);
+  cv::resize(grey, small, cv::Size(400, 300), 0, 0, cv::INTER_AREA);
+  const FeatureSet from_small = ExtractSift(small, SiftOptions());
+  ASSERT_GT(from_small.Size(), 100u);
+  ASSERT_EQ(from_large.Size(), from_small.Size());
+  EXPECT_EQ(from_large.descriptors, from_small.descriptors);
+  float max_x = 0.0f;
+  for (size_t i = 0; i < from_small.Size(); ++i) {
+    EXPECT_NEAR(from_large.keypoints[i].x, 4.0f * from_small.keypoints[i].x, 1e-3f);
+    EXPECT_NEAR(from_large.keypoints[i].y, 4.0f * from_small.keypoints[i].y, 1e-3f);
+    EXPECT_NEAR(from_large.keypoints[i].Scale(), 4.0f * from_small.keypoints[i].Scale(),
+                1e-3f);
+    max_x = std::max(max_x, from_large.keypoints[i].x);
+  }
+  EXPECT_GT(max_x, 1500.0f) << "keypoints are not in the large frame's pixels";
+
+  // Frames within the limit are used as they are.
+  EXPECT_EQ(PrepareSiftInput(Texture(320, 240), SiftOptions()).grey.cols, 320);
+  options.max_image_size = 0;
   EXPECT_THROW(options.Check(), InvalidArgument);
 }
 

@@ -79,8 +79,12 @@ class CameraRegistry {
 };
 
 struct WorkItem {
+  // The keyframe without its pixels: only the SIFT input travels through the pipeline, so a
+  // large frame is held no longer than it takes to decode and shrink it.
   Keyframe keyframe;
+  int width = 0, height = 0;
   bool resumed = false;
+  SiftInput sift_input;
   FeatureSet features;
 };
 
@@ -129,13 +133,21 @@ ExtractReport ExtractFeatures(const std::filesystem::path& input, Database& data
               }
               auto item = std::make_shared<WorkItem>();
               item->keyframe = std::move(*keyframe);
+              cv::Mat& image = item->keyframe.frame.image;
+              item->width = image.cols;
+              item->height = image.rows;
               item->resumed = already_extracted.count(item->keyframe.frame.name) > 0;
+              if (!item->resumed) item->sift_input = PrepareSiftInput(image, options.sift);
+              image.release();
               return item;
             }) &
             tbb::make_filter<std::shared_ptr<WorkItem>, std::shared_ptr<WorkItem>>(
                 tbb::filter_mode::parallel,
                 [&](std::shared_ptr<WorkItem> item) {
-                  if (!item->resumed) item->features = ExtractSift(item->keyframe.frame.image, options.sift);
+                  if (!item->resumed) {
+                    item->features = ExtractSift(item->sift_input, options.sift);
+                    item->sift_input = SiftInput();
+                  }
                   return item;
                 }) &
             tbb::make_filter<std::shared_ptr<WorkItem>, void>(
@@ -149,7 +161,7 @@ ExtractReport ExtractFeatures(const std::filesystem::path& input, Database& data
                   }
                   Frame frame;
                   frame.name = raw.name;
-                  frame.camera_id = cameras.CameraFor(raw.image.cols, raw.image.rows, raw.name);
+                  frame.camera_id = cameras.CameraFor(item->width, item->height, raw.name);
                   Database::Transaction transaction(database);
                   frame.image_id = database.WriteFrame(frame);
                   database.WriteFeatures(frame.image_id, item->features);

@@ -59,7 +59,8 @@ nlohmann::json ExtractFingerprint(const fs::path& input, const ExtractOptions& o
             {"contrast_threshold", sift.contrast_threshold},
             {"edge_threshold", sift.edge_threshold},
             {"num_octave_layers", sift.num_octave_layers},
-            {"upscale", sift.upscale}}},
+            {"upscale", sift.upscale},
+            {"max_image_size", sift.max_image_size}}},
           {"camera_model", std::string(CameraModelName(options.camera_model))},
           {"intrinsics", intrinsics}};
 }
