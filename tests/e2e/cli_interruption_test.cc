@@ -1,0 +1,91 @@
+// kill -9 in the middle of mapping, then the same command again: the rerun recomputes
+// nothing that was stored (frames, pairs), goes on from the last mapping checkpoint, and
+// ends with the model an uninterrupted run makes, byte for byte (one thread, default seed).
+// bench/interruption/kill_campaign.sh does the same at random moments in every stage.
+
+#include <nlohmann/json.hpp>
+
+#include <cstring>
+
+#include "cli_test_util.h"
+
+namespace loopsfm::e2e {
+namespace {
+
+// The JSON header of a mapping checkpoint (pipeline/mapper_checkpoint.h).
+nlohmann::json CheckpointHeader(const fs::path& path) {
+  const std::string bytes = ReadFileBytes(path);
+  constexpr size_t kMagic = 26, kLengthAt = kMagic + 4;
+  if (bytes.size() < kLengthAt + 8) return nullptr;
+  uint64_t length = 0;
+  std::memcpy(&length, bytes.data() + kLengthAt, 8);
+  if (length > bytes.size() - kLengthAt - 8) return nullptr;
+  return nlohmann::json::parse(bytes.substr(kLengthAt + 8, length), nullptr, false);
+}
+
+std::vector<std::string> ReconstructArgs(const fs::path& video, const fs::path& out) {
+  return {"--threads", "1", "reconstruct", video.string(), "-o", out.string(), "--export",
+          "colmap,tum", "--checkpoint-every", "0.001"};
+}
+
+void ExpectSameResult(const fs::path& a, const fs::path& b) {
+  for (const char* file : {"sparse/0/cameras.bin", "sparse/0/images.bin",
+                           "sparse/0/points3D.bin", "trajectory.txt"}) {
+    ASSERT_TRUE(fs::exists(a / file)) << a / file;
+    EXPECT_TRUE(ReadFileBytes(a / file) == ReadFileBytes(b / file)) << file << " differs";
+  }
+}
+
+TEST(Interruption, KilledWhileMappingGoesOnFromTheCheckpointToTheSameModel) {
+  TempDir dir;
+  const CommandResult synth =
+      RunLoopsfm({"-q", "synth", "street", "-o", (dir / "scene").string(), "--video", "--frames",
+                  "100", "--width", "320", "--height", "240"});
+  ASSERT_EQ(synth.exit_code, 0) << synth;
+  const fs::path video = dir / "scene" / "video.mp4";
+
+  const CommandResult reference = RunLoopsfm(ReconstructArgs(video, dir / "reference"));
+  ASSERT_EQ(reference.exit_code, 0) << reference;
+
+  // Killed two seconds after the first checkpoint (they are written before every
+  // registration here), well before mapping ends.
+  std::string command;
+  for (const std::string& arg : ReconstructArgs(video, dir / "killed")) command += " " + ShellQuote(arg);
+  const fs::path checkpoint = dir / "killed" / "mapper_checkpoint.bin";
+  const CommandResult killed = RunShell(fmt::format(
+      "{}{} > {} 2>&1 & pid=$!; while [ ! -f {} ] && kill -0 $pid 2>/dev/null; do sleep 0.05; "
+      "done; sleep 2; kill -9 $pid; wait $pid",
+      ShellQuote(LoopsfmBinary().string()), command, ShellQuote((dir / "killed.log").string()),
+      ShellQuote(checkpoint.string())));
+  ASSERT_EQ(killed.exit_code, 128 + 9) << killed << "\n" << ReadFileBytes(dir / "killed.log");
+  ASSERT_FALSE(fs::exists(dir / "killed" / "sparse")) << "mapping ended before the kill";
+  const nlohmann::json header = CheckpointHeader(checkpoint);
+  ASSERT_TRUE(header.is_object()) << "the checkpoint left by the kill cannot be read";
+  EXPECT_FALSE(header.at("finished").get<bool>());
+  const int registered_before = header.at("report").at("counts").at(1).get<int>();
+  EXPECT_GT(registered_before, 2);
+
+  const CommandResult rerun = RunLoopsfm(ReconstructArgs(video, dir / "killed"));
+  ASSERT_EQ(rerun.exit_code, 0) << rerun;
+  EXPECT_NE(rerun.output.find("(0 new)"), std::string::npos) << "frames extracted again" << rerun;
+  EXPECT_NE(rerun.output.find("(0 matched now"), std::string::npos) << "pairs matched again" << rerun;
+  EXPECT_NE(rerun.output.find("going on from a checkpoint"), std::string::npos) << rerun;
+  ExpectSameResult(dir / "reference", dir / "killed");
+
+  // Once more: mapping had finished, nothing is mapped again, the result is the same.
+  const CommandResult again = RunLoopsfm(ReconstructArgs(video, dir / "killed"));
+  ASSERT_EQ(again.exit_code, 0) << again;
+  EXPECT_NE(again.output.find("mapping had finished"), std::string::npos) << again;
+  ExpectSameResult(dir / "reference", dir / "killed");
+
+  // --checkpoint-every 0 neither reads nor writes one; --overwrite deletes it.
+  const CommandResult overwrite = RunLoopsfm({"-q", "--threads", "1", "reconstruct",
+                                              video.string(), "-o", (dir / "killed").string(),
+                                              "--export", "none", "--overwrite",
+                                              "--checkpoint-every", "0"});
+  ASSERT_EQ(overwrite.exit_code, 0) << overwrite;
+  EXPECT_FALSE(fs::exists(checkpoint));
+}
+
+}  // namespace
+}  // namespace loopsfm::e2e
