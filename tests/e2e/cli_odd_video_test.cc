@@ -8,7 +8,8 @@
 //   variable frame rate  frames are named by their place in the decoded stream, in order,
 //                      none lost or repeated; the model matches the ground truth joined by
 //                      those names.
-//   repeated facades   identical buildings along the walk must not close false loops.
+//   repeated facades   identical buildings along the walk must not close false loops nor
+//                      bend the path (disabled: it fails today, see the test).
 //
 // Figures measured when the tests were written are given with each test; the bounds follow
 // from the problem, with room for the machine's noise.
@@ -273,6 +274,53 @@ TEST(CliOddVideoTest, VariableFrameRateVideoKeepsEveryFrameInOrder) {
     const int index = std::stoi(every_names[w].substr(6, 6));  // frame_%06d.png
     EXPECT_EQ(index / 3, static_cast<int>(w)) << every_names[w];
   }
+}
+
+// Identical buildings along a walk that never comes back (80 % of the way around a block of
+// six identical buildings): every loop the mapper closes would be false, and the path must
+// keep its shape. The bounds: no loop closed (the ground truth has no revisit), ATE under
+// 0.25 % of the path (the same walk past buildings that differ: 0.085 %, 3x that).
+//
+// DISABLED: it fails today. Measured (120 frames, 320x240, known intrinsics): no loop closed,
+// but ATE 6.3 % of the path (81 m) and rotation error mean 9.4 deg: pairs of frames 13 m
+// apart (two building widths) that see different but identical facades verify with 150 to
+// 290 inliers (e.g. frames 62 and 82, planar), their matches join the tracks (910 conflicting
+// tracks split against 326 without the repetition) and the model shortens a side by a
+// building's width. With a true revisit (--laps 1 --revisit 0.25, 160 frames) the same:
+// ATE 3.2 %, no loop closed. Look-alike pairs that are near in time slip past the loop
+// closer's drift bounds; they must be refused where pairs are verified or tracks built
+// (e.g. a pair's relative pose against the chain of sequential poses between its frames).
+TEST(CliOddVideoTest, DISABLED_RepeatedFacadesCloseNoFalseLoopAndKeepThePath) {
+  constexpr int kFrames = 120;
+  TempDir tmp;
+  const fs::path scene = tmp / "scene";
+  const CommandResult synth = RunLoopsfm(
+      {"-q", "synth", "street", "--video", "-o", scene.string(), "--frames",
+       std::to_string(kFrames), "--width", "320", "--height", "240", "--look-ahead", "30",
+       "--repeated-facades", "--laps", "0", "--revisit", "0.8"});
+  ASSERT_EQ(synth.exit_code, 0) << "rendering failed" << synth;
+  const fs::path out = tmp / "out";
+  const CommandResult run =
+      RunLoopsfm({"reconstruct", (scene / "video.mp4").string(), "-o", out.string(),
+                  "--intrinsics", (scene / "intrinsics.txt").string(), "--export", "colmap"});
+  ASSERT_EQ(run.exit_code, 0) << run;
+  EXPECT_EQ(CaptureNumber(run.output, "loop closing +detection [0-9.]+ s, (\\d+) closed"), 0.0)
+      << run;
+  ASSERT_FALSE(fs::exists(out / "sparse" / "1")) << "the walk broke into several models" << run;
+  const Reconstruction model = ReadColmapModel(out / "sparse" / "0");
+  const TrajectoryMetrics metrics =
+      EvaluateTrajectory(model, ReadTrajectoryFile(scene / "groundtruth.txt"));
+  ASSERT_TRUE(metrics.aligned) << metrics.explanation;
+  std::cout << fmt::format(
+      "[ info     ] repeated facades: {} / {} registered, ATE {:.4f} % of path {:.4g}, rotation "
+      "error mean {:.3f} deg\n",
+      metrics.num_matched, metrics.num_gt_frames, 100.0 * metrics.ate_fraction_of_path,
+      metrics.gt_path_length, metrics.rotation_error_mean_deg);
+  ASSERT_TRUE(metrics.loop_gaps.has_value());
+  EXPECT_EQ(metrics.loop_gaps->num_revisits, 0u) << "the walk was meant never to come back";
+  EXPECT_GE(metrics.num_matched, static_cast<size_t>(0.95 * kFrames));
+  EXPECT_LT(metrics.ate_fraction_of_path, 0.0025);
+  EXPECT_LT(metrics.rotation_error_mean_deg, 0.6);
 }
 
 }  // namespace
