@@ -11,55 +11,18 @@
 namespace loopsfm {
 namespace {
 
-// A camera as OpenCV's undistortion takes it: K in OpenCV's pixel convention (top-left
-// pixel centre at 0, COLMAP's at 0.5) and the distortion coefficients in OpenCV's order.
+// A camera as OpenCV's undistortion takes it (Camera::ToOpenCv, K in OpenCV's pixels).
 struct OpenCvLens {
   cv::Matx33d K;
-  std::vector<double> distortion;  // (k1, k2, p1, p2[, k3, k4, k5, k6]) or fisheye (k1..k4)
+  std::vector<double> distortion;  // (k1, k2, p1, p2, k3, k4, k5, k6) or fisheye (k1..k4)
   bool fisheye = false;
 };
 
-cv::Matx33d OpenCvK(double fx, double fy, double cx, double cy) {
-  return {fx, 0.0, cx - 0.5, 0.0, fy, cy - 0.5, 0.0, 0.0, 1.0};
-}
-
+// OpenCV's K: its top-left pixel centre is at 0, COLMAP's at 0.5.
 OpenCvLens ToOpenCv(const Camera& camera) {
-  const std::vector<double>& p = camera.params;
-  switch (camera.model_id) {
-    case CameraModelId::kSimplePinhole:
-      return {OpenCvK(p[0], p[0], p[1], p[2]), {}, false};
-    case CameraModelId::kPinhole:
-      return {OpenCvK(p[0], p[1], p[2], p[3]), {}, false};
-    case CameraModelId::kSimpleRadial:
-      return {OpenCvK(p[0], p[0], p[1], p[2]), {p[3], 0.0, 0.0, 0.0}, false};
-    case CameraModelId::kRadial:
-      return {OpenCvK(p[0], p[0], p[1], p[2]), {p[3], p[4], 0.0, 0.0}, false};
-    case CameraModelId::kOpenCV:
-      return {OpenCvK(p[0], p[1], p[2], p[3]), {p[4], p[5], p[6], p[7]}, false};
-    case CameraModelId::kFullOpenCV:
-      return {OpenCvK(p[0], p[1], p[2], p[3]), {p.begin() + 4, p.end()}, false};
-    case CameraModelId::kOpenCVFisheye:
-      return {OpenCvK(p[0], p[1], p[2], p[3]), {p[4], p[5], p[6], p[7]}, true};
-    case CameraModelId::kSimpleRadialFisheye:
-      return {OpenCvK(p[0], p[0], p[1], p[2]), {p[3], 0.0, 0.0, 0.0}, true};
-    case CameraModelId::kRadialFisheye:
-      return {OpenCvK(p[0], p[0], p[1], p[2]), {p[3], p[4], 0.0, 0.0}, true};
-  }
-  LOOPSFM_CHECK_MSG(false, "unhandled camera model {}", camera.ModelName());
-  return {};
-}
-
-double FocalX(const Camera& camera) { return camera.params[0]; }
-double FocalY(const Camera& camera) {
-  switch (camera.model_id) {
-    case CameraModelId::kPinhole:
-    case CameraModelId::kOpenCV:
-    case CameraModelId::kFullOpenCV:
-    case CameraModelId::kOpenCVFisheye:
-      return camera.params[1];
-    default:
-      return camera.params[0];
-  }
+  const OpenCvIntrinsics o = camera.ToOpenCv();
+  return {cv::Matx33d(o.fx, 0.0, o.cx - 0.5, 0.0, o.fy, o.cy - 0.5, 0.0, 0.0, 1.0), o.distortion,
+          o.fisheye};
 }
 
 }  // namespace
@@ -72,7 +35,8 @@ void UndistortOptions::Check() const {
 
 Camera UndistortedCamera(const Camera& distorted, const UndistortOptions& options) {
   options.Check();
-  const double fx = FocalX(distorted), fy = FocalY(distorted);
+  const OpenCvIntrinsics lens = distorted.ToOpenCv();
+  const double fx = lens.fx, fy = lens.fy;
   // The undistorted rays of the image border, on the normalised plane: the largest
   // rectangle inside them holds only pixels that come from the image.
   const int steps = 100;
@@ -107,8 +71,7 @@ Camera UndistortedCamera(const Camera& distorted, const UndistortOptions& option
 ImageUndistorter::ImageUndistorter(const Camera& distorted, const UndistortOptions& options)
     : distorted_(distorted), undistorted_(UndistortedCamera(distorted, options)) {
   const OpenCvLens lens = ToOpenCv(distorted);
-  const std::vector<double>& p = undistorted_.params;
-  const cv::Matx33d new_k = OpenCvK(p[0], p[1], p[2], p[3]);
+  const cv::Matx33d new_k = ToOpenCv(undistorted_).K;
   const cv::Size size(undistorted_.width, undistorted_.height);
   if (lens.fisheye) {
     cv::fisheye::initUndistortRectifyMap(lens.K, lens.distortion, cv::Matx33d::eye(), new_k, size,

@@ -36,6 +36,41 @@ double Camera::MeanFocalLength() const {
   });
 }
 
+OpenCvIntrinsics Camera::ToOpenCv() const {
+  const std::vector<double>& p = params;
+  const auto perspective = [](double fx, double fy, double cx, double cy,
+                              std::vector<double> coefficients) {
+    coefficients.resize(8, 0.0);
+    return OpenCvIntrinsics{fx, fy, cx, cy, std::move(coefficients), false};
+  };
+  const auto fisheye = [](double fx, double fy, double cx, double cy,
+                          std::vector<double> coefficients) {
+    coefficients.resize(4, 0.0);
+    return OpenCvIntrinsics{fx, fy, cx, cy, std::move(coefficients), true};
+  };
+  switch (model_id) {
+    case CameraModelId::kSimplePinhole:
+      return perspective(p[0], p[0], p[1], p[2], {});
+    case CameraModelId::kPinhole:
+      return perspective(p[0], p[1], p[2], p[3], {});
+    case CameraModelId::kSimpleRadial:
+      return perspective(p[0], p[0], p[1], p[2], {p[3]});
+    case CameraModelId::kRadial:
+      return perspective(p[0], p[0], p[1], p[2], {p[3], p[4]});
+    case CameraModelId::kOpenCV:
+    case CameraModelId::kFullOpenCV:  // COLMAP's order after fx fy cx cy is OpenCV's
+      return perspective(p[0], p[1], p[2], p[3], {p.begin() + 4, p.end()});
+    case CameraModelId::kOpenCVFisheye:
+      return fisheye(p[0], p[1], p[2], p[3], {p.begin() + 4, p.end()});
+    case CameraModelId::kSimpleRadialFisheye:
+      return fisheye(p[0], p[0], p[1], p[2], {p[3]});
+    case CameraModelId::kRadialFisheye:
+      return fisheye(p[0], p[0], p[1], p[2], {p[3], p[4]});
+  }
+  LOOPSFM_CHECK_MSG(false, "unhandled camera model {}", ModelName());
+  return {};
+}
+
 Eigen::Vector2d Camera::CamFromImg(const Eigen::Vector2d& pixel) const {
   return VisitCameraModel(model_id, [&](auto model) {
     return decltype(model)::CamFromImg(params.data(), pixel.x(), pixel.y());

@@ -11,6 +11,17 @@
 
 namespace loopsfm {
 
+// A camera in OpenCV's form, which calib3d's undistortion, nerfstudio and most other tools
+// take: focal lengths and principal point (COLMAP's pixel convention: the top-left pixel's
+// centre at 0.5), and the distortion in OpenCV's order, (k1, k2, p1, p2, k3, k4, k5, k6)
+// for the perspective models and (k1, k2, k3, k4) for the fisheye ones, zero where the
+// model has no such term.
+struct OpenCvIntrinsics {
+  double fx = 0.0, fy = 0.0, cx = 0.0, cy = 0.0;
+  std::vector<double> distortion;
+  bool fisheye = false;
+};
+
 struct Camera {
   camera_t camera_id = kInvalidCameraId;
   CameraModelId model_id = CameraModelId::kPinhole;
@@ -31,6 +42,7 @@ struct Camera {
 
   std::string ModelName() const { return std::string(CameraModelName(model_id)); }
   double MeanFocalLength() const;
+  OpenCvIntrinsics ToOpenCv() const;
   // Normalised image-plane coordinates (z = 1) of a pixel.
   Eigen::Vector2d CamFromImg(const Eigen::Vector2d& pixel) const;
   // Pixel of a point in camera coordinates (z > 0 expected).

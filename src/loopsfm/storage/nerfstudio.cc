@@ -12,73 +12,24 @@ void NerfstudioOptions::Check() const {
 }
 
 nlohmann::json NerfstudioIntrinsics(const Camera& camera) {
-  const std::vector<double>& p = camera.params;
-  nlohmann::json j = {{"w", camera.width}, {"h", camera.height}};
-  auto set_pinhole = [&](double fx, double fy, double cx, double cy) {
-    j["fl_x"] = fx;
-    j["fl_y"] = fy;
-    j["cx"] = cx;
-    j["cy"] = cy;
-  };
-  auto set_distortion = [&](const char* model, double k1, double k2, double k3, double k4,
-                            double p1, double p2) {
-    j["camera_model"] = model;
-    j["k1"] = k1;
-    j["k2"] = k2;
-    j["k3"] = k3;
-    j["k4"] = k4;
-    j["p1"] = p1;
-    j["p2"] = p2;
-  };
-  switch (camera.model_id) {
-    case CameraModelId::kSimplePinhole:
-      set_pinhole(p[0], p[0], p[1], p[2]);
-      set_distortion("OPENCV", 0, 0, 0, 0, 0, 0);
-      break;
-    case CameraModelId::kPinhole:
-      set_pinhole(p[0], p[1], p[2], p[3]);
-      set_distortion("OPENCV", 0, 0, 0, 0, 0, 0);
-      break;
-    case CameraModelId::kSimpleRadial:
-      set_pinhole(p[0], p[0], p[1], p[2]);
-      set_distortion("OPENCV", p[3], 0, 0, 0, 0, 0);
-      break;
-    case CameraModelId::kRadial:
-      set_pinhole(p[0], p[0], p[1], p[2]);
-      set_distortion("OPENCV", p[3], p[4], 0, 0, 0, 0);
-      break;
-    case CameraModelId::kOpenCV:
-      set_pinhole(p[0], p[1], p[2], p[3]);
-      set_distortion("OPENCV", p[4], p[5], 0, 0, p[6], p[7]);
-      break;
-    case CameraModelId::kFullOpenCV:
-      // fx fy cx cy k1 k2 p1 p2 k3 k4 k5 k6: nerfstudio's OPENCV holds k1..k3, p1, p2 only.
-      if (p[9] != 0.0 || p[10] != 0.0 || p[11] != 0.0) {
-        throw InvalidArgument(fmt::format(
-            "transforms.json cannot hold camera {}'s FULL_OPENCV rational distortion (k4..k6 = "
-            "{}, {}, {}); export the undistorted layout instead (--export gsplat), or map with "
-            "--camera-model OPENCV",
-            camera.camera_id, p[9], p[10], p[11]));
-      }
-      set_pinhole(p[0], p[1], p[2], p[3]);
-      set_distortion("OPENCV", p[4], p[5], p[8], 0, p[6], p[7]);
-      break;
-    case CameraModelId::kOpenCVFisheye:
-      set_pinhole(p[0], p[1], p[2], p[3]);
-      set_distortion("OPENCV_FISHEYE", p[4], p[5], p[6], p[7], 0, 0);
-      break;
-    case CameraModelId::kSimpleRadialFisheye:
-      set_pinhole(p[0], p[0], p[1], p[2]);
-      set_distortion("OPENCV_FISHEYE", p[3], 0, 0, 0, 0, 0);
-      break;
-    case CameraModelId::kRadialFisheye:
-      set_pinhole(p[0], p[0], p[1], p[2]);
-      set_distortion("OPENCV_FISHEYE", p[3], p[4], 0, 0, 0, 0);
-      break;
-  }
-  if (j["camera_model"] == "OPENCV_FISHEYE") {
-    j.erase("p1");
-    j.erase("p2");
+  const OpenCvIntrinsics o = camera.ToOpenCv();
+  const std::vector<double>& d = o.distortion;
+  nlohmann::json j = {{"w", camera.width}, {"h", camera.height}, {"fl_x", o.fx},
+                      {"fl_y", o.fy},      {"cx", o.cx},         {"cy", o.cy}};
+  if (o.fisheye) {
+    j.update({{"camera_model", "OPENCV_FISHEYE"}, {"k1", d[0]}, {"k2", d[1]}, {"k3", d[2]},
+              {"k4", d[3]}});
+  } else {
+    // nerfstudio's OPENCV holds k1..k3, p1, p2: not FULL_OPENCV's rational k4..k6.
+    if (d[5] != 0.0 || d[6] != 0.0 || d[7] != 0.0) {
+      throw InvalidArgument(fmt::format(
+          "transforms.json cannot hold camera {}'s FULL_OPENCV rational distortion (k4..k6 = "
+          "{}, {}, {}); export the undistorted layout instead (--export gsplat), or map with "
+          "--camera-model OPENCV",
+          camera.camera_id, d[5], d[6], d[7]));
+    }
+    j.update({{"camera_model", "OPENCV"}, {"k1", d[0]}, {"k2", d[1]}, {"k3", d[4]}, {"k4", 0.0},
+              {"p1", d[2]}, {"p2", d[3]}});
   }
   return j;
 }
