@@ -197,8 +197,10 @@ AbsolutePoseReport EstimateAbsolutePose(std::span<const Eigen::Vector2d> points2
     refinement.refine_focal_length = false;
     refinement.refine_extra_params = false;
     Camera camera_copy = camera;
-    RefineAbsolutePose(refinement, ransac.inlier_mask, points2D, points3D_in_world,
-                       &report.cam_from_world, &camera_copy);
+    report.refinement_failed =
+        !RefineAbsolutePose(refinement, ransac.inlier_mask, points2D, points3D_in_world,
+                            &report.cam_from_world, &camera_copy)
+             .success;
   }
 
   // Inliers by the pixel error of the final pose.

@@ -87,6 +87,9 @@ struct AbsolutePoseReport {
   int num_inliers = 0;
   // RANSAC trials drawn.
   int num_trials = 0;
+  // The pose refinement was asked for and failed (the solver gave no usable solution): the
+  // RANSAC pose was kept.
+  bool refinement_failed = false;
 };
 
 // points2D are pixels (COLMAP convention), points3D_in_world their 3D points; same size.

@@ -262,7 +262,8 @@ nlohmann::json ReportJson(const MapperReport& r) {
                   r.num_registered_on_retry, r.num_models_merged, r.num_models_discarded,
                   r.num_local_ba, r.num_global_ba, r.num_local_ba_iterations,
                   r.num_local_ba_residuals, r.num_global_ba_iterations,
-                  r.num_global_ba_residuals, r.num_failed_bundles, r.num_loops_refused,
+                  r.num_global_ba_residuals, r.num_failed_bundles, r.num_failed_pose_refinements,
+                  r.num_loops_refused,
                   r.num_split_groups, r.num_split_groups_refused, r.num_split_pairs}},
       {"seconds", {r.seconds_registration, r.seconds_triangulation, r.seconds_local_ba,
                    r.seconds_global_ba, r.seconds_merging, r.seconds_loop_detection,
@@ -276,7 +277,7 @@ nlohmann::json ReportJson(const MapperReport& r) {
 MapperReport ReportFromJson(const nlohmann::json& j) {
   MapperReport r;
   const nlohmann::json& c = j.at("counts");
-  if (c.size() != 18) throw InputError("the report's counts are not 18 numbers");
+  if (c.size() != 19) throw InputError("the report's counts are not 19 numbers");
   int k = 0;
   for (int* field : {&r.num_models, &r.num_registered, &r.num_init_trials, &r.num_init_accepted,
                      &r.num_registered_on_retry, &r.num_models_merged, &r.num_models_discarded,
@@ -287,7 +288,8 @@ MapperReport ReportFromJson(const nlohmann::json& j) {
                            &r.num_global_ba_iterations, &r.num_global_ba_residuals}) {
     *field = c.at(k++).get<long long>();
   }
-  for (int* field : {&r.num_failed_bundles, &r.num_loops_refused, &r.num_split_groups,
+  for (int* field : {&r.num_failed_bundles, &r.num_failed_pose_refinements,
+                     &r.num_loops_refused, &r.num_split_groups,
                      &r.num_split_groups_refused, &r.num_split_pairs}) {
     *field = c.at(k++).get<int>();
   }

@@ -195,8 +195,10 @@ struct MapperReport {
   long long num_local_ba_residuals = 0;
   long long num_global_ba_iterations = 0;
   long long num_global_ba_residuals = 0;
-  // Bundle adjustments whose solver failed (the model kept its previous state).
+  // Bundle adjustments whose solver failed (the model kept its previous state), and
+  // registrations whose pose refinement failed (the RANSAC pose was used).
   int num_failed_bundles = 0;
+  int num_failed_pose_refinements = 0;
   double seconds_registration = 0.0;
   double seconds_triangulation = 0.0;
   double seconds_local_ba = 0.0;

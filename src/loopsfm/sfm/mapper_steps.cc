@@ -33,6 +33,10 @@ bool MapperState::RegisterImage(image_t image_id, Random& random, MapperReport* 
   const AbsolutePoseReport result = EstimateAbsolutePose(
       points2D, points3D, reconstruction_.GetCamera(image.camera_id), pose_options, random);
   report->seconds_registration += timer.ElapsedSeconds();
+  if (result.refinement_failed) {
+    ++report->num_failed_pose_refinements;
+    spdlog::debug("pose refinement of {} failed; its RANSAC pose is used", image.name);
+  }
   if (!result.success || result.num_inliers < options_.abs_pose_min_num_inliers ||
       result.num_inliers < options_.abs_pose_min_inlier_ratio * points2D.size()) {
     spdlog::debug("could not register {}: {} of {} correspondences fit", image.name,
