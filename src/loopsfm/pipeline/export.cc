@@ -221,7 +221,12 @@ ExportReport Export(std::vector<Reconstruction>* models, const std::vector<std::
   auto wants = [&](ExportFormat f) { return options.formats.count(f) > 0; };
   const Reconstruction& model0 = (*models)[0];
   // Formats that cannot be written fail before anything is.
-  if (wants(ExportFormat::kNerfstudio)) NerfstudioTransforms(model0);
+  std::optional<nlohmann::json> transforms;
+  if (wants(ExportFormat::kNerfstudio)) {
+    NerfstudioOptions ns;
+    if (!wants(ExportFormat::kPly) && !fs::exists(output_dir / "points.ply")) ns.ply_file_path = "";
+    transforms = NerfstudioTransforms(model0, ns);
+  }
 
   // One pass over the frames for images, gsplat and colours.
   const fs::path images_dir = output_dir / "images";
@@ -307,14 +312,12 @@ ExportReport Export(std::vector<Reconstruction>* models, const std::vector<std::
     WriteTrajectoryFile(output_dir / "trajectory.txt", TrajectoryFromReconstruction(model0));
     report.written.push_back(output_dir / "trajectory.txt");
   }
-  if (wants(ExportFormat::kNerfstudio)) {
-    NerfstudioOptions ns;
-    if (!wants(ExportFormat::kPly) && !fs::exists(output_dir / "points.ply")) ns.ply_file_path = "";
+  if (transforms) {
     if (!fs::is_directory(images_dir)) {
       spdlog::warn("transforms.json points at images/, which is not there; export the frames "
                    "too (--export ...,images)");
     }
-    WriteNerfstudioTransforms(output_dir / "transforms.json", model0, ns);
+    WriteNerfstudioTransforms(output_dir / "transforms.json", *transforms);
     report.written.push_back(output_dir / "transforms.json");
   }
   report.seconds = timer.ElapsedSeconds();

@@ -72,10 +72,7 @@ nlohmann::json NerfstudioTransforms(const Reconstruction& reconstruction,
   return transforms;
 }
 
-void WriteNerfstudioTransforms(const std::filesystem::path& path,
-                               const Reconstruction& reconstruction,
-                               const NerfstudioOptions& options) {
-  const nlohmann::json transforms = NerfstudioTransforms(reconstruction, options);
+void WriteNerfstudioTransforms(const std::filesystem::path& path, const nlohmann::json& transforms) {
   std::ofstream out(path);
   out << transforms.dump(2) << "\n";
   if (!out) {

@@ -38,9 +38,8 @@ nlohmann::json NerfstudioIntrinsics(const Camera& camera);
 nlohmann::json NerfstudioTransforms(const Reconstruction& reconstruction,
                                     const NerfstudioOptions& options = {});
 
-// Writes NerfstudioTransforms to `path`; throws StorageError when it cannot be written.
-void WriteNerfstudioTransforms(const std::filesystem::path& path,
-                               const Reconstruction& reconstruction,
-                               const NerfstudioOptions& options = {});
+// Writes transforms (NerfstudioTransforms) to `path`; throws StorageError when it cannot be
+// written.
+void WriteNerfstudioTransforms(const std::filesystem::path& path, const nlohmann::json& transforms);
 
 }  // namespace loopsfm

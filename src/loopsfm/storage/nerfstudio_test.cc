@@ -31,7 +31,7 @@ TEST(Nerfstudio, PosesConvertBackToTheModelWithin1e9) {
   Reconstruction rec = model_io_test::MakeScene();
   const std::filesystem::path dir = std::filesystem::path(::testing::TempDir()) / "ns_poses";
   std::filesystem::create_directories(dir);
-  WriteNerfstudioTransforms(dir / "transforms.json", rec);
+  WriteNerfstudioTransforms(dir / "transforms.json", NerfstudioTransforms(rec));
   std::ifstream in(dir / "transforms.json");
   const nlohmann::json transforms = nlohmann::json::parse(in);
 
