@@ -1,6 +1,7 @@
 #include "loopsfm/scene/reconstruction.h"
 
 #include <algorithm>
+#include <cmath>
 #include <set>
 
 #include "loopsfm/util/errors.h"
@@ -148,6 +149,12 @@ void Reconstruction::RestoreMapped(const MappedState& state) {
                                    camera.camera_id, camera.ModelName(), camera.width,
                                    camera.height));
     }
+    camera.Check();
+    if (!std::all_of(camera.params.begin(), camera.params.end(),
+                     [](double p) { return std::isfinite(p); })) {
+      throw InputError(fmt::format("saved camera {} has parameters that are not finite",
+                                   camera.camera_id));
+    }
     it->second = camera;
   }
   for (const MappedState::RegisteredImage& r : state.registered) {
@@ -156,15 +163,21 @@ void Reconstruction::RestoreMapped(const MappedState& state) {
       throw InputError(fmt::format("saved frame {} is not an input frame, or appears twice",
                                    r.image_id));
     }
+    if (!r.cam_from_world.rotation.coeffs().allFinite() ||
+        !r.cam_from_world.translation.allFinite() ||
+        std::abs(r.cam_from_world.rotation.norm() - 1.0) > 1e-6) {
+      throw InputError(fmt::format("saved pose of frame {} is not a finite rotation and "
+                                   "translation", r.image_id));
+    }
     it->second.cam_from_world = r.cam_from_world;
     RegisterImage(r.image_id);
   }
   point3D_t next_id = state.next_point3D_id;
   for (const MappedState::SavedPoint& saved : state.points) {
     if (saved.point3D_id == kInvalidPoint3DId || points3D_.count(saved.point3D_id) > 0 ||
-        saved.track.size() < 2) {
-      throw InputError(fmt::format("saved 3D point {} is invalid, repeated or has fewer than "
-                                   "two observations", saved.point3D_id));
+        saved.track.size() < 2 || !saved.xyz.allFinite()) {
+      throw InputError(fmt::format("saved 3D point {} is invalid, repeated, not finite or has "
+                                   "fewer than two observations", saved.point3D_id));
     }
     for (const TrackElement& el : saved.track) {
       const auto it = images_.find(el.image_id);

@@ -139,6 +139,11 @@ TEST(MapperCheckpoint, ACheckpointOfOtherFramesIsSetAside) {
   resuming.resume = &foreign;
   ExpectIdentical(uninterrupted, Map(p, options, resuming), "frame 9999 is not an input frame");
 
+  MapperCheckpoint not_finite = checkpoints[checkpoints.size() / 2];
+  not_finite.growing->state.registered.back().cam_from_world.translation.x() = std::nan("");
+  resuming.resume = &not_finite;
+  ExpectIdentical(uninterrupted, Map(p, options, resuming), "a pose is not finite");
+
   MapperCheckpoint broken = checkpoints[checkpoints.size() / 2];
   broken.random_state = "not a state";
   resuming.resume = &broken;
