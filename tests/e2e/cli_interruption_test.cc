@@ -1,6 +1,7 @@
 // kill -9 in the middle of mapping, then the same command again: the rerun recomputes
 // nothing that was stored (frames, pairs), goes on from the last mapping checkpoint, and
 // ends with the model an uninterrupted run makes, byte for byte (one thread, default seed).
+// A run killed while mapping leaves the model of an earlier run as it was.
 // bench/interruption/kill_campaign.sh does the same at random moments in every stage.
 
 #include <nlohmann/json.hpp>
@@ -76,6 +77,20 @@ TEST(Interruption, KilledWhileMappingGoesOnFromTheCheckpointToTheSameModel) {
   const CommandResult again = RunLoopsfm(ReconstructArgs(video, dir / "killed"));
   ASSERT_EQ(again.exit_code, 0) << again;
   EXPECT_NE(again.output.find("mapping had finished"), std::string::npos) << again;
+  ExpectSameResult(dir / "reference", dir / "killed");
+
+  // Mapping again with other options (a new checkpoint replaces the old one), killed in the
+  // middle: the earlier run's model is still there, unchanged.
+  fs::copy_file(checkpoint, dir / "checkpoint.before");
+  std::string other;
+  for (const std::string& arg : ReconstructArgs(video, dir / "killed")) other += " " + ShellQuote(arg);
+  const CommandResult killed_again = RunShell(fmt::format(
+      "{}{} --loop-closing none > {} 2>&1 & pid=$!; while cmp -s {} {} && kill -0 $pid "
+      "2>/dev/null; do sleep 0.05; done; sleep 1; kill -9 $pid; wait $pid",
+      ShellQuote(LoopsfmBinary().string()), other, ShellQuote((dir / "killed2.log").string()),
+      ShellQuote(checkpoint.string()), ShellQuote((dir / "checkpoint.before").string())));
+  ASSERT_EQ(killed_again.exit_code, 128 + 9)
+      << killed_again << "\n" << ReadFileBytes(dir / "killed2.log");
   ExpectSameResult(dir / "reference", dir / "killed");
 
   // --checkpoint-every 0 neither reads nor writes one; --overwrite deletes it.
