@@ -1,6 +1,9 @@
 #include "loopsfm/scene/camera.h"
 
 #include <algorithm>
+#include <cmath>
+
+#include <fmt/ranges.h>
 
 #include "loopsfm/util/errors.h"
 
@@ -99,7 +102,11 @@ void Camera::Check() const {
                                  }),
                                  params.size()));
   }
-  if (MeanFocalLength() <= 0) {
+  if (!std::all_of(params.begin(), params.end(), [](double p) { return std::isfinite(p); })) {
+    throw InputError(fmt::format("camera parameters must be finite numbers, got {}",
+                                 fmt::join(params, " ")));
+  }
+  if (!(MeanFocalLength() > 0)) {
     throw InputError(fmt::format("camera focal length must be positive, got {}", MeanFocalLength()));
   }
 }

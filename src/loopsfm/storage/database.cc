@@ -105,6 +105,13 @@ Camera ReadCameraRow(sqlite3_stmt* stmt, const std::string& path) {
   camera.params.resize(num_params);
   std::memcpy(camera.params.data(), sqlite3_column_blob(stmt, 4), num_bytes);
   camera.has_prior_focal_length = sqlite3_column_int64(stmt, 5) != 0;
+  try {
+    camera.Check();
+  } catch (const InputError& e) {
+    throw StorageError(fmt::format("database {}: camera {}: {}; the database is damaged: start "
+                                   "the output folder again (--overwrite)",
+                                   path, camera.camera_id, e.what()));
+  }
   return camera;
 }
 }  // namespace

@@ -562,3 +562,38 @@ TEST_F(DatabaseTest, OpensEmptyFileAndMovedDatabase) {
 
 }  // namespace
 }  // namespace loopsfm
+
+namespace loopsfm {
+namespace {
+
+// A camera row that no camera can have (written by another tool, or damaged): a clear
+// StorageError naming the camera, not a camera with a zero size or a NaN focal length.
+TEST(Database, ImpossibleCameraRowsAreRefused) {
+  const std::string path =
+      (std::filesystem::temp_directory_path() / "loopsfm_db_bad_camera.db").string();
+  for (const char* update : {"UPDATE cameras SET width = 0",
+                             "UPDATE cameras SET params = zeroblob(32)",
+                             "UPDATE cameras SET params = X'000000000000F87F000000000000F87F"
+                             "000000000000F87F000000000000F87F'"}) {
+    for (const char* suffix : {"", "-wal", "-shm"}) std::filesystem::remove(path + suffix);
+    {
+      Database db = Database::Open(path);
+      ASSERT_EQ(db.WriteCamera(Camera::GuessFromImageSize(640, 480)), 1u);
+    }
+    sqlite3* raw = nullptr;
+    ASSERT_EQ(sqlite3_open(path.c_str(), &raw), SQLITE_OK);
+    ASSERT_EQ(sqlite3_exec(raw, update, nullptr, nullptr, nullptr), SQLITE_OK) << update;
+    sqlite3_close(raw);
+    const Database db = Database::Open(path);
+    try {
+      db.ReadCameras();
+      ADD_FAILURE() << update << ": read without an error";
+    } catch (const StorageError& e) {
+      EXPECT_NE(std::string(e.what()).find("camera 1"), std::string::npos) << e.what();
+    }
+  }
+  for (const char* suffix : {"", "-wal", "-shm"}) std::filesystem::remove(path + suffix);
+}
+
+}  // namespace
+}  // namespace loopsfm
