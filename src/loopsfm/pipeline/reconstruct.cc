@@ -135,10 +135,11 @@ ReconstructReport Reconstruct(const fs::path& input, const fs::path& output_dir,
   stage.Restart();
   std::vector<Reconstruction> models;
   {
-    const nlohmann::json fingerprint = MapperCheckpointFingerprint(mapper_input, options.mapper);
+    nlohmann::json fingerprint;  // digests the whole mapper input: only with checkpoints
     std::optional<MapperCheckpoint> resume;
     MapperCheckpointing checkpointing;
     if (options.checkpoint_interval_seconds > 0.0) {
+      fingerprint = MapperCheckpointFingerprint(mapper_input, options.mapper);
       resume = ReadMapperCheckpoint(checkpoint_path, fingerprint);
       if (resume) checkpointing.resume = &*resume;
       checkpointing.interval_seconds = options.checkpoint_interval_seconds;
