@@ -270,20 +270,46 @@ void BundleAdjuster::AddImage(image_t image_id) {
   double* rotation = image.cam_from_world.rotation.coeffs().data();
   double* translation = image.cam_from_world.translation.data();
 
+  const bool constant_camera = IsCameraConstant(image.camera_id);
   for (const Point2D& point2D : image.points2D) {
     if (!point2D.HasPoint3D()) continue;
     Point3D& point = reconstruction_->GetPoint3D(point2D.point3D_id);
     points_added_.insert(point2D.point3D_id);
     if (constant_pose) {
-      problem_->AddResidualBlock(CreateReprojectionErrorConstantPoseCost(
-                                     camera.model_id, image.cam_from_world, point2D.xy),
-                                 loss_function_, point.xyz.data(), camera.params.data());
+      AddConstantPoseResidual(image, point2D.xy, &point);
+    } else if (constant_camera) {
+      problem_->AddResidualBlock(
+          CreateReprojectionErrorConstantCameraCost(camera.model_id, camera.params, point2D.xy),
+          loss_function_, rotation, translation, point.xyz.data());
     } else {
       problem_->AddResidualBlock(CreateReprojectionErrorCost(camera.model_id, point2D.xy),
                                  loss_function_, rotation, translation, point.xyz.data(),
                                  camera.params.data());
     }
     ++report_.num_reprojection_residual_blocks;
+  }
+}
+
+bool BundleAdjuster::IsCameraConstant(camera_t camera_id) const {
+  const Camera& camera = reconstruction_->GetCamera(camera_id);
+  return config_cameras_.count(camera_id) == 0 || config_.HasConstantCamera(camera_id) ||
+         static_cast<int>(ConstantCameraParams(camera.model_id, options_).size()) ==
+             CameraModelNumParams(camera.model_id);
+}
+
+void BundleAdjuster::AddConstantPoseResidual(const Image& image, const Eigen::Vector2d& observed,
+                                             Point3D* point) {
+  Camera& camera = reconstruction_->GetCamera(image.camera_id);
+  LOOPSFM_CHECK_EQ(static_cast<int>(camera.params.size()), CameraModelNumParams(camera.model_id));
+  cameras_added_.insert(image.camera_id);
+  if (IsCameraConstant(image.camera_id)) {
+    problem_->AddResidualBlock(CreateReprojectionErrorConstantPoseCameraCost(
+                                   camera.model_id, image.cam_from_world, camera.params, observed),
+                               loss_function_, point->xyz.data());
+  } else {
+    problem_->AddResidualBlock(
+        CreateReprojectionErrorConstantPoseCost(camera.model_id, image.cam_from_world, observed),
+        loss_function_, point->xyz.data(), camera.params.data());
   }
 }
 
@@ -305,13 +331,7 @@ void BundleAdjuster::AddPoint(point3D_t point3D_id, bool constant) {
                                          : k * (outside.size() - 1) / (num_kept - 1);
     const TrackElement& element = *outside[index];
     const Image& image = reconstruction_->GetImage(element.image_id);
-    Camera& camera = reconstruction_->GetCamera(image.camera_id);
-    LOOPSFM_CHECK_EQ(static_cast<int>(camera.params.size()), CameraModelNumParams(camera.model_id));
-    cameras_added_.insert(image.camera_id);
-    problem_->AddResidualBlock(
-        CreateReprojectionErrorConstantPoseCost(camera.model_id, image.cam_from_world,
-                                                image.points2D.at(element.point2D_idx).xy),
-        loss_function_, point.xyz.data(), camera.params.data());
+    AddConstantPoseResidual(image, image.points2D.at(element.point2D_idx).xy, &point);
     ++report_.num_reprojection_residual_blocks;
   }
   if (constant) problem_->SetParameterBlockConstant(point.xyz.data());

@@ -205,6 +205,12 @@ class BundleAdjuster {
  private:
   void AddImage(image_t image_id);
   void AddPoint(point3D_t point3D_id, bool constant);
+  // The residual of an observation by an image whose pose is held constant.
+  void AddConstantPoseResidual(const Image& image, const Eigen::Vector2d& observed,
+                               Point3D* point);
+  // Whether the camera's parameters stay fixed in this problem (they are then data in the
+  // residuals, not a parameter block).
+  bool IsCameraConstant(camera_t camera_id) const;
   void AddPoseBlocks(image_t image_id);
   void ParameterizeCameras();
   void ConfigureSolver(ceres::Solver::Options* solver_options);

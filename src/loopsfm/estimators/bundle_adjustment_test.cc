@@ -649,6 +649,25 @@ TEST_P(ReprojectionCostTest, MatchesCameraProjectionAndFiniteDifferences) {
   ASSERT_TRUE(constant_pose->Evaluate(point_parameters.data(), residuals.data(), nullptr));
   EXPECT_LT((residuals - expected).norm(), 1e-9);
   ExpectJacobiansMatchFiniteDifferences(*constant_pose, point_blocks);
+
+  // The camera as data: same residuals, derivatives for the remaining blocks only.
+  std::unique_ptr<ceres::CostFunction> constant_camera(
+      CreateReprojectionErrorConstantCameraCost(camera.model_id, camera.params, observed));
+  std::vector<std::vector<double>> pose_point_blocks = {blocks[0], blocks[1], blocks[2]};
+  std::vector<const double*> pose_point_parameters;
+  for (const auto& block : pose_point_blocks) pose_point_parameters.push_back(block.data());
+  ASSERT_TRUE(constant_camera->Evaluate(pose_point_parameters.data(), residuals.data(), nullptr));
+  EXPECT_LT((residuals - expected).norm(), 1e-9);
+  ExpectJacobiansMatchFiniteDifferences(*constant_camera, pose_point_blocks);
+
+  std::unique_ptr<ceres::CostFunction> constant_pose_camera(
+      CreateReprojectionErrorConstantPoseCameraCost(camera.model_id, cam_from_world, camera.params,
+                                                    observed));
+  std::vector<std::vector<double>> only_point = {blocks[2]};
+  const double* only_point_parameters[] = {only_point[0].data()};
+  ASSERT_TRUE(constant_pose_camera->Evaluate(only_point_parameters, residuals.data(), nullptr));
+  EXPECT_LT((residuals - expected).norm(), 1e-9);
+  ExpectJacobiansMatchFiniteDifferences(*constant_pose_camera, only_point);
 }
 
 INSTANTIATE_TEST_SUITE_P(Models, ReprojectionCostTest, ::testing::ValuesIn(kCameraModelIds));

@@ -8,10 +8,18 @@
 //   cam_from_world translation 3
 //   point3D_in_world          3
 //   camera params             Model::kNumParams, in the model's order (see kParamsInfo)
-// The constant-pose variant stores cam_from_world and has only the last two blocks.
+// The constant-pose variant stores cam_from_world and has only the last two blocks; the
+// constant-camera variants store the camera parameters and drop the last block. A constant
+// block is cheaper as data than as a constant parameter block: automatic differentiation
+// would still carry its derivatives (14 per residual instead of 10 for a posed image with a
+// known camera, 7 instead of 3 for an anchoring observation).
 //
 // A point behind the camera still yields a finite residual (no cheirality test), as in
 // COLMAP; the mapper removes such observations by their reprojection error.
+
+#include <algorithm>
+#include <array>
+#include <vector>
 
 #include <Eigen/Core>
 #include <Eigen/Geometry>
@@ -21,6 +29,34 @@
 #include "loopsfm/sensor/camera_models.h"
 
 namespace loopsfm {
+
+// Residual of a point in camera coordinates: projected - observed.
+template <typename CameraModel, typename T>
+void ProjectionResidual(const T* camera_params, const Eigen::Matrix<T, 3, 1>& point_in_cam,
+                        const Eigen::Vector2d& observed, T* residuals) {
+  CameraModel::ImgFromCam(camera_params, point_in_cam[0], point_in_cam[1], point_in_cam[2],
+                          &residuals[0], &residuals[1]);
+  residuals[0] -= T(observed.x());
+  residuals[1] -= T(observed.y());
+}
+
+// Camera parameters held as data, cast to the evaluation's scalar type.
+template <typename CameraModel>
+class CameraParamsData {
+ public:
+  explicit CameraParamsData(const std::vector<double>& params) {
+    std::copy(params.begin(), params.begin() + CameraModel::kNumParams, params_.begin());
+  }
+  template <typename T>
+  std::array<T, CameraModel::kNumParams> As() const {
+    std::array<T, CameraModel::kNumParams> cast;
+    for (int i = 0; i < CameraModel::kNumParams; ++i) cast[i] = T(params_[i]);
+    return cast;
+  }
+
+ private:
+  std::array<double, CameraModel::kNumParams> params_;
+};
 
 template <typename CameraModel>
 class ReprojectionErrorCost {
@@ -39,11 +75,8 @@ class ReprojectionErrorCost {
     const Eigen::Map<const Eigen::Quaternion<T>> rotation(cam_from_world_rotation);
     const Eigen::Map<const Eigen::Matrix<T, 3, 1>> translation(cam_from_world_translation);
     const Eigen::Map<const Eigen::Matrix<T, 3, 1>> point(point3D_in_world);
-    const Eigen::Matrix<T, 3, 1> point_in_cam = rotation * point + translation;
-    CameraModel::ImgFromCam(camera_params, point_in_cam[0], point_in_cam[1], point_in_cam[2],
-                            &residuals[0], &residuals[1]);
-    residuals[0] -= T(observed_.x());
-    residuals[1] -= T(observed_.y());
+    ProjectionResidual<CameraModel, T>(camera_params, rotation * point + translation, observed_,
+                                       residuals);
     return true;
   }
 
@@ -51,8 +84,36 @@ class ReprojectionErrorCost {
   Eigen::Vector2d observed_;
 };
 
-// The pose is data, not a parameter: for images whose pose is held constant (cheaper than a
-// constant parameter block, whose Jacobian autodiff would still compute).
+template <typename CameraModel>
+class ReprojectionErrorConstantCameraCost {
+ public:
+  ReprojectionErrorConstantCameraCost(const std::vector<double>& camera_params,
+                                      const Eigen::Vector2d& observed)
+      : camera_(camera_params), observed_(observed) {}
+
+  static ceres::CostFunction* Create(const std::vector<double>& camera_params,
+                                     const Eigen::Vector2d& observed) {
+    return new ceres::AutoDiffCostFunction<ReprojectionErrorConstantCameraCost, 2, 4, 3, 3>(
+        new ReprojectionErrorConstantCameraCost(camera_params, observed));
+  }
+
+  template <typename T>
+  bool operator()(const T* cam_from_world_rotation, const T* cam_from_world_translation,
+                  const T* point3D_in_world, T* residuals) const {
+    const Eigen::Map<const Eigen::Quaternion<T>> rotation(cam_from_world_rotation);
+    const Eigen::Map<const Eigen::Matrix<T, 3, 1>> translation(cam_from_world_translation);
+    const Eigen::Map<const Eigen::Matrix<T, 3, 1>> point(point3D_in_world);
+    ProjectionResidual<CameraModel, T>(camera_.template As<T>().data(),
+                                       rotation * point + translation, observed_, residuals);
+    return true;
+  }
+
+ private:
+  CameraParamsData<CameraModel> camera_;
+  Eigen::Vector2d observed_;
+};
+
+// The pose is data, not a parameter: for images whose pose is held constant.
 template <typename CameraModel>
 class ReprojectionErrorConstantPoseCost {
  public:
@@ -70,19 +131,50 @@ class ReprojectionErrorConstantPoseCost {
 
   template <typename T>
   bool operator()(const T* point3D_in_world, const T* camera_params, T* residuals) const {
-    const Eigen::Map<const Eigen::Matrix<T, 3, 1>> point(point3D_in_world);
-    const Eigen::Matrix<T, 3, 1> point_in_cam =
-        rotation_.cast<T>() * point + translation_.cast<T>();
-    CameraModel::ImgFromCam(camera_params, point_in_cam[0], point_in_cam[1], point_in_cam[2],
-                            &residuals[0], &residuals[1]);
-    residuals[0] -= T(observed_.x());
-    residuals[1] -= T(observed_.y());
+    ProjectionResidual<CameraModel, T>(camera_params, PointInCamera(point3D_in_world), observed_,
+                                       residuals);
     return true;
+  }
+
+  template <typename T>
+  Eigen::Matrix<T, 3, 1> PointInCamera(const T* point3D_in_world) const {
+    const Eigen::Map<const Eigen::Matrix<T, 3, 1>> point(point3D_in_world);
+    return rotation_.cast<T>() * point + translation_.cast<T>();
   }
 
  private:
   Eigen::Matrix3d rotation_;
   Eigen::Vector3d translation_;
+  Eigen::Vector2d observed_;
+};
+
+// Pose and camera both data: only the point is a parameter.
+template <typename CameraModel>
+class ReprojectionErrorConstantPoseCameraCost {
+ public:
+  ReprojectionErrorConstantPoseCameraCost(const Rigid3d& cam_from_world,
+                                          const std::vector<double>& camera_params,
+                                          const Eigen::Vector2d& observed)
+      : pose_(cam_from_world, observed), camera_(camera_params), observed_(observed) {}
+
+  static ceres::CostFunction* Create(const Rigid3d& cam_from_world,
+                                     const std::vector<double>& camera_params,
+                                     const Eigen::Vector2d& observed) {
+    return new ceres::AutoDiffCostFunction<ReprojectionErrorConstantPoseCameraCost, 2, 3>(
+        new ReprojectionErrorConstantPoseCameraCost(cam_from_world, camera_params, observed));
+  }
+
+  template <typename T>
+  bool operator()(const T* point3D_in_world, T* residuals) const {
+    ProjectionResidual<CameraModel, T>(camera_.template As<T>().data(),
+                                       pose_.PointInCamera(point3D_in_world), observed_,
+                                       residuals);
+    return true;
+  }
+
+ private:
+  ReprojectionErrorConstantPoseCost<CameraModel> pose_;
+  CameraParamsData<CameraModel> camera_;
   Eigen::Vector2d observed_;
 };
 
@@ -94,10 +186,27 @@ inline ceres::CostFunction* CreateReprojectionErrorCost(CameraModelId model_id,
   });
 }
 
+inline ceres::CostFunction* CreateReprojectionErrorConstantCameraCost(
+    CameraModelId model_id, const std::vector<double>& camera_params,
+    const Eigen::Vector2d& observed) {
+  return VisitCameraModel(model_id, [&](auto model) -> ceres::CostFunction* {
+    return ReprojectionErrorConstantCameraCost<decltype(model)>::Create(camera_params, observed);
+  });
+}
+
 inline ceres::CostFunction* CreateReprojectionErrorConstantPoseCost(
     CameraModelId model_id, const Rigid3d& cam_from_world, const Eigen::Vector2d& observed) {
   return VisitCameraModel(model_id, [&](auto model) -> ceres::CostFunction* {
     return ReprojectionErrorConstantPoseCost<decltype(model)>::Create(cam_from_world, observed);
+  });
+}
+
+inline ceres::CostFunction* CreateReprojectionErrorConstantPoseCameraCost(
+    CameraModelId model_id, const Rigid3d& cam_from_world,
+    const std::vector<double>& camera_params, const Eigen::Vector2d& observed) {
+  return VisitCameraModel(model_id, [&](auto model) -> ceres::CostFunction* {
+    return ReprojectionErrorConstantPoseCameraCost<decltype(model)>::Create(
+        cam_from_world, camera_params, observed);
   });
 }
 
