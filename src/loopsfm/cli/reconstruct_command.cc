@@ -68,10 +68,12 @@ void PrintSummary(const ReconstructReport& report) {
                      per(m.num_global_ba_residuals, m.num_global_ba));
   out += fmt::format("{:<28}{} initial pairs tried ({} accepted), {} registered on a retry, {} "
                      "models merged, {} discarded, {} failed bundles, {} failed pose "
-                     "refinements\n",
+                     "refinements, {} poses against their neighbours in time ({} registered "
+                     "from the neighbours' points)\n",
                      "  mapper", m.num_init_trials, m.num_init_accepted, m.num_registered_on_retry,
                      m.num_models_merged, m.num_models_discarded, m.num_failed_bundles,
-                     m.num_failed_pose_refinements);
+                     m.num_failed_pose_refinements, m.num_poses_against_neighbours,
+                     m.num_poses_from_neighbours);
   out += fmt::format("{:<28}detection {:.1f} s, {} closed ({:.1f} s), {} refused as too large "
                      "for drift\n",
                      "  loop closing", m.seconds_loop_detection, m.loops_closed.size(),

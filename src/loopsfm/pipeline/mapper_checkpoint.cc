@@ -13,7 +13,7 @@ namespace fs = std::filesystem;
 namespace {
 
 constexpr char kMagic[] = "loopsfm mapper checkpoint\n";
-constexpr uint32_t kVersion = 1;
+constexpr uint32_t kVersion = 2;
 
 // FNV-1a over the bytes of what mapping reads.
 class Digest {
@@ -263,7 +263,7 @@ nlohmann::json ReportJson(const MapperReport& r) {
                   r.num_local_ba, r.num_global_ba, r.num_local_ba_iterations,
                   r.num_local_ba_residuals, r.num_global_ba_iterations,
                   r.num_global_ba_residuals, r.num_failed_bundles, r.num_failed_pose_refinements,
-                  r.num_loops_refused,
+                  r.num_poses_against_neighbours, r.num_poses_from_neighbours, r.num_loops_refused,
                   r.num_split_groups, r.num_split_groups_refused, r.num_split_pairs}},
       {"seconds", {r.seconds_registration, r.seconds_triangulation, r.seconds_local_ba,
                    r.seconds_global_ba, r.seconds_merging, r.seconds_loop_detection,
@@ -277,7 +277,7 @@ nlohmann::json ReportJson(const MapperReport& r) {
 MapperReport ReportFromJson(const nlohmann::json& j) {
   MapperReport r;
   const nlohmann::json& c = j.at("counts");
-  if (c.size() != 19) throw InputError("the report's counts are not 19 numbers");
+  if (c.size() != 21) throw InputError("the report's counts are not 21 numbers");
   int k = 0;
   for (int* field : {&r.num_models, &r.num_registered, &r.num_init_trials, &r.num_init_accepted,
                      &r.num_registered_on_retry, &r.num_models_merged, &r.num_models_discarded,
@@ -289,6 +289,7 @@ MapperReport ReportFromJson(const nlohmann::json& j) {
     *field = c.at(k++).get<long long>();
   }
   for (int* field : {&r.num_failed_bundles, &r.num_failed_pose_refinements,
+                     &r.num_poses_against_neighbours, &r.num_poses_from_neighbours,
                      &r.num_loops_refused, &r.num_split_groups,
                      &r.num_split_groups_refused, &r.num_split_pairs}) {
     *field = c.at(k++).get<int>();

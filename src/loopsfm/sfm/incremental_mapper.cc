@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <memory>
+#include <tuple>
 #include <unordered_map>
 #include <unordered_set>
 
@@ -77,6 +78,9 @@ void IncrementalMapperOptions::Check() const {
   LOOPSFM_REQUIRE_OPTION(min_tri_angle_deg >= 0, "triangulation angle must not be negative");
   LOOPSFM_REQUIRE_OPTION(local_ba_num_images >= 1, "local bundle needs at least one image");
   LOOPSFM_REQUIRE_OPTION(global_ba_growth > 0, "global bundle growth must be positive");
+  LOOPSFM_REQUIRE_OPTION(registration_capture_window >= 0 && registration_neighbour_window >= 0,
+                         "registration capture and neighbour windows must be >= 0, got {} and {}",
+                         registration_capture_window, registration_neighbour_window);
   LOOPSFM_REQUIRE_OPTION(max_num_models >= 1, "at least one model must be allowed");
   LOOPSFM_REQUIRE_OPTION(min_model_size >= 2, "models need at least 2 frames, got {}", min_model_size);
   LOOPSFM_REQUIRE_OPTION(merge_max_reproj_error_px > 0, "merge error threshold must be positive");
@@ -324,7 +328,7 @@ class IncrementalMapper {
     while (true) {
       MaybeSaveCheckpoint(*model);
       Reconstruction& rec = model->reconstruction();
-      std::vector<std::pair<size_t, image_t>> order;
+      std::vector<std::tuple<bool, size_t, image_t>> order;
       for (const auto& [id, count] : model->CountVisibleTracks()) {
         if (count < static_cast<size_t>(options_.abs_pose_min_num_inliers)) continue;
         const auto failed = failed_at.find(id);
@@ -333,11 +337,12 @@ class IncrementalMapper {
         }
         const int owner = KeptModelOf(id);
         if (owner >= 0 && merge_failures_[models_[owner].get()] >= kMaxMergeFailures) continue;
-        order.push_back({count, id});
+        order.push_back(
+            {model->NearRegisteredFrame(id, options_.registration_capture_window), count, id});
       }
       std::sort(order.begin(), order.end(), std::greater<>());
       bool registered = false;
-      for (const auto& [count, image_id] : order) {
+      for (const auto& [near, count, image_id] : order) {
         if (!model->RegisterImage(image_id, random_, &report_)) {
           failed_at[image_id] = count;
           ever_failed.insert(image_id);

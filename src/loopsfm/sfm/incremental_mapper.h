@@ -114,6 +114,17 @@ struct IncrementalMapperOptions {
   // A frame that failed to register is tried again once it sees this factor more of the
   // model's tracks, or after the next global bundle adjustment.
   double registration_retry_growth = 1.2;
+  // Registration order: frames within this many frames in capture order of a registered one
+  // go first (most visible tracks first among them), the others after; 0 ranks all frames by
+  // visible tracks alone. A frame far in time from the model that sees many of its tracks
+  // may see look-alike structure (identical facades): registered before its neighbours it
+  // lands where its twin is, and the model grows on from there. Reached from its
+  // neighbours, its true pose has their support.
+  int registration_capture_window = 2;
+  // A registration's pose must fit the points the frame shares with the registered frames
+  // nearest to it in capture order, within this many frames (MapperState::
+  // AgreementWithNeighbours); 0 checks nothing.
+  int registration_neighbour_window = 10;
   // Triangulation and filtering: reprojection error in pixels, angle in degrees.
   double max_reproj_error_px = 4.0;
   double min_tri_angle_deg = 1.5;
@@ -199,6 +210,10 @@ struct MapperReport {
   // registrations whose pose refinement failed (the RANSAC pose was used).
   int num_failed_bundles = 0;
   int num_failed_pose_refinements = 0;
+  // Registrations whose first pose disagreed with the frames next to it in capture order,
+  // and those of them registered with a pose from the points those frames see.
+  int num_poses_against_neighbours = 0;
+  int num_poses_from_neighbours = 0;
   double seconds_registration = 0.0;
   double seconds_triangulation = 0.0;
   double seconds_local_ba = 0.0;

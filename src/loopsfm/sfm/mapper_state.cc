@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <tuple>
 
 #include "loopsfm/geometry/triangulation.h"
 #include "loopsfm/util/errors.h"
@@ -21,6 +22,13 @@ MapperState::MapperState(const MapperInput& input, const IncrementalMapperOption
     for (size_t i = 0; i < frame.points2D.size(); ++i) image.points2D[i].xy = frame.points2D[i];
     reconstruction_.AddImage(std::move(image));
     track_of_[frame.image_id].assign(frame.points2D.size(), -1);
+  }
+  for (size_t k = 0; k < input.frames.size(); ++k) {
+    capture_index_[input.frames[k].image_id] = static_cast<int>(k);
+  }
+  for (const MapperPair& pair : input.pairs) {
+    pairs_of_[pair.pair.image_id1].push_back(&pair);
+    pairs_of_[pair.pair.image_id2].push_back(&pair);
   }
   for (size_t t = 0; t < input.tracks.size(); ++t) {
     for (const TrackElement& el : input.tracks[t].elements) {
@@ -281,6 +289,63 @@ size_t MapperState::FilterPoints(const std::vector<point3D_t>& point_ids) {
     }
   }
   return removed;
+}
+
+bool MapperState::NearRegisteredFrame(image_t image_id, int window) const {
+  const int index = capture_index_.at(image_id);
+  const int last = static_cast<int>(input_.frames.size()) - 1;
+  for (int k = std::max(0, index - window); k <= std::min(last, index + window); ++k) {
+    if (k != index && reconstruction_.IsRegistered(input_.frames[k].image_id)) return true;
+  }
+  return false;
+}
+
+std::vector<std::pair<point2D_t, point3D_t>> MapperState::NeighbourCorrespondences(
+    image_t image_id) const {
+  std::vector<std::pair<point2D_t, point3D_t>> correspondences;
+  const int window = options_.registration_neighbour_window;
+  const auto pairs = pairs_of_.find(image_id);
+  if (window <= 0 || pairs == pairs_of_.end()) return correspondences;
+  const int index = capture_index_.at(image_id);
+  // (distance in capture order, other frame, pair) of registered frames within the window.
+  std::vector<std::tuple<int, image_t, const MapperPair*>> near;
+  for (const MapperPair* pair : pairs->second) {
+    const image_t other =
+        pair->pair.image_id1 == image_id ? pair->pair.image_id2 : pair->pair.image_id1;
+    const int distance = std::abs(capture_index_.at(other) - index);
+    if (distance <= window && reconstruction_.IsRegistered(other)) {
+      near.push_back({distance, other, pair});
+    }
+  }
+  std::sort(near.begin(), near.end());
+  if (near.size() > 2) near.resize(2);
+  for (const auto& [distance, other, pair] : near) {
+    const bool first = pair->pair.image_id1 == image_id;
+    const Image& other_image = reconstruction_.GetImage(other);
+    for (const FeatureMatch& match : pair->geometry.inlier_matches) {
+      const point2D_t own = first ? match.point2D_idx1 : match.point2D_idx2;
+      const point2D_t theirs = first ? match.point2D_idx2 : match.point2D_idx1;
+      const point3D_t point = other_image.points2D[theirs].point3D_id;
+      if (point != kInvalidPoint3DId) correspondences.push_back({own, point});
+    }
+  }
+  return correspondences;
+}
+
+MapperState::NeighbourAgreement MapperState::AgreementWithNeighbours(
+    image_t image_id, const Rigid3d& cam_from_world,
+    const std::vector<std::pair<point2D_t, point3D_t>>& correspondences) const {
+  NeighbourAgreement agreement;
+  const Image& image = reconstruction_.GetImage(image_id);
+  const Camera& camera = reconstruction_.GetCamera(image.camera_id);
+  for (const auto& [own, point] : correspondences) {
+    ++agreement.num_checked;
+    const Eigen::Vector3d in_cam = cam_from_world * reconstruction_.GetPoint3D(point).xyz;
+    if (in_cam.z() <= 1e-9) continue;
+    const double error = (camera.ImgFromCam(in_cam) - image.points2D[own].xy).norm();
+    if (error <= options_.abs_pose_max_error_px) ++agreement.num_fit;
+  }
+  return agreement;
 }
 
 std::unordered_map<image_t, size_t> MapperState::CountVisibleTracks() const {

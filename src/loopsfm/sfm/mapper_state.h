@@ -64,9 +64,32 @@ class MapperState {
   // behind the camera.
   double ReprojectionErrorPx(const Eigen::Vector3d& xyz, const TrackElement& element) const;
 
+  // --- Capture order ----------------------------------------------------------------
+  // Whether a frame within `window` frames of the image in capture order is registered.
+  bool NearRegisteredFrame(image_t image_id, int window) const;
+  // The 2D-3D correspondences an unregistered image has through its verified pairs with the
+  // registered frames nearest to it in capture order (the two nearest within
+  // registration_neighbour_window frames): its keypoint and the 3D point of the keypoint
+  // matched in the other frame.
+  std::vector<std::pair<point2D_t, point3D_t>> NeighbourCorrespondences(image_t image_id) const;
+  // How a pose of the image fits those correspondences: a point fits when it reprojects
+  // within abs_pose_max_error_px.
+  struct NeighbourAgreement {
+    int num_checked = 0;
+    int num_fit = 0;
+    // Enough shared points to judge, and fewer than half of them fit.
+    bool Disagrees() const { return num_checked >= 20 && 2 * num_fit < num_checked; }
+  };
+  NeighbourAgreement AgreementWithNeighbours(
+      image_t image_id, const Rigid3d& cam_from_world,
+      const std::vector<std::pair<point2D_t, point3D_t>>& correspondences) const;
+
   // --- Registration and refinement (mapper_steps.cc) -----------------------------------
   // Registers an image from its 2D-3D correspondences (P3P in LO-RANSAC, pose refinement).
-  // Returns false, leaving the model unchanged, when too few correspondences fit.
+  // A pose that disagrees with the frames next to it in capture order (AgreementWith-
+  // Neighbours) is estimated again from the points those frames observe, and refused when
+  // that one disagrees too. Returns false, leaving the model unchanged, when too few
+  // correspondences fit.
   bool RegisterImage(image_t image_id, Random& random, MapperReport* report);
   // Bundle over the image and the frames sharing most points with it, then filtering of
   // the points involved. Returns false when the solver failed (the model is unchanged).
@@ -95,6 +118,9 @@ class MapperState {
   Reconstruction reconstruction_;
   // track_of_[image_id][point2D_idx] = track index or -1.
   std::unordered_map<image_t, std::vector<int>> track_of_;
+  // Position of each frame in capture order, and the verified pairs of each frame.
+  std::unordered_map<image_t, int> capture_index_;
+  std::unordered_map<image_t, std::vector<const MapperPair*>> pairs_of_;
   image_t gauge1_ = kInvalidImageId, gauge2_ = kInvalidImageId;
 };
 

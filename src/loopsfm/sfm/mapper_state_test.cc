@@ -14,7 +14,8 @@ using testing::MapperProblemOptions;
 // Registers frames [begin, end) at their true poses, the ones from `shifted_from` on moved
 // by `shift` (a drifted part of the path).
 void RegisterAtTruth(const MapperProblem& p, MapperState& state, int begin, int end,
-                     int shifted_from = 1 << 30, const Eigen::Vector3d& shift = {}) {
+                     int shifted_from = 1 << 30,
+                     const Eigen::Vector3d& shift = Eigen::Vector3d::Zero()) {
   for (int i = begin; i < end; ++i) {
     const image_t id = p.input.frames[i].image_id;
     Rigid3d pose = p.cam_from_world[i];
@@ -94,6 +95,101 @@ TEST(MapperState, CountsVisibleTracksOncePerTrack) {
   ASSERT_GT(expected, 100u);
   EXPECT_EQ(visible.at(4), expected);
   EXPECT_EQ(visible.count(1), 0u);  // registered
+}
+
+}  // namespace
+}  // namespace loopsfm
+
+namespace loopsfm {
+namespace {
+
+// A frame that also sees a twin of what an earlier frame saw (an identical facade further
+// along): a false verified pair links its twin keypoints to frame `twin`'s tracks, and its
+// true link to the model is a thinned pair with the previous frame, so the twin
+// correspondences outnumber the true ones.
+struct TwinProblem {
+  MapperProblem p;
+  int frame = 0;
+  int twin = 0;
+};
+
+TwinProblem MakeTwinProblem() {
+  MapperProblemOptions options;
+  options.num_frames = 20;
+  options.overlap = 4;
+  TwinProblem t{MakeMapperProblem(options), 16, 3};
+  MapperInput& input = t.p.input;
+  const image_t frame_id = input.frames[t.frame].image_id;
+  // Of the frame's true pairs only the one with the previous frame stays, with 40 % of its
+  // matches.
+  std::erase_if(input.pairs, [&](const MapperPair& pair) {
+    const bool has = pair.pair.image_id1 == frame_id || pair.pair.image_id2 == frame_id;
+    const image_t other = pair.pair.image_id1 == frame_id ? pair.pair.image_id2 : pair.pair.image_id1;
+    return has && other != input.frames[t.frame - 1].image_id;
+  });
+  for (MapperPair& pair : input.pairs) {
+    if (pair.pair.image_id1 != frame_id && pair.pair.image_id2 != frame_id) continue;
+    FeatureMatches& matches = pair.geometry.inlier_matches;
+    FeatureMatches kept;
+    for (size_t k = 0; k < matches.size(); k += 5) {
+      kept.push_back(matches[k]);
+      if (k + 1 < matches.size()) kept.push_back(matches[k + 1]);
+    }
+    matches = kept;
+  }
+  // The twin view: the keypoints of frame `twin`, seen again by `frame`.
+  MapperFrame& frame = input.frames[t.frame];
+  const MapperFrame& twin = input.frames[t.twin];
+  const point2D_t offset = static_cast<point2D_t>(frame.points2D.size());
+  MapperPair false_pair;
+  false_pair.pair = ImagePair(twin.image_id, frame.image_id);
+  for (point2D_t k = 0; k < twin.points2D.size(); ++k) {
+    frame.points2D.push_back(twin.points2D[k]);
+    t.p.keypoint_point[t.frame].push_back(-1);
+    false_pair.geometry.inlier_matches.push_back({k, offset + k});
+  }
+  false_pair.geometry.config = TwoViewGeometry::kPlanarOrPanoramic;
+  input.pairs.push_back(false_pair);
+  testing::RebuildTracks(&input);
+  return t;
+}
+
+TEST(MapperState, RegistrationKeepsToWhatTheFramesNextInTimeSee) {
+  const TwinProblem t = MakeTwinProblem();
+  const image_t id = t.p.input.frames[t.frame].image_id;
+  auto centre_error = [&](const MapperState& state) {
+    return (state.reconstruction().GetImage(id).ProjectionCenter() -
+            t.p.cam_from_world[t.frame].Inverse().translation).norm();
+  };
+  const double step = 0.3;
+
+  // Without the check the twin wins: the frame lands where frame `twin` is.
+  IncrementalMapperOptions unchecked;
+  unchecked.registration_neighbour_window = 0;
+  MapperState fooled(t.p.input, unchecked);
+  RegisterAtTruth(t.p, fooled, 0, t.frame);
+  Random random(5);
+  MapperReport fooled_report;
+  ASSERT_TRUE(fooled.RegisterImage(id, random, &fooled_report));
+  EXPECT_GT(centre_error(fooled), 0.8 * (t.frame - t.twin) * step)
+      << "the problem must tempt the registration to the twin";
+  EXPECT_EQ(fooled_report.num_poses_against_neighbours, 0);
+
+  IncrementalMapperOptions options;
+  MapperState state(t.p.input, options);
+  RegisterAtTruth(t.p, state, 0, t.frame);
+  MapperReport report;
+  ASSERT_TRUE(state.RegisterImage(id, random, &report));
+  EXPECT_LT(centre_error(state), 0.05 * step);
+  EXPECT_EQ(report.num_poses_against_neighbours, 1);
+  EXPECT_EQ(report.num_poses_from_neighbours, 1);
+  // The pose fits the neighbour's points.
+  const auto correspondences = state.NeighbourCorrespondences(id);
+  EXPECT_GT(correspondences.size(), 100u);
+  EXPECT_FALSE(state
+                   .AgreementWithNeighbours(
+                       id, state.reconstruction().GetImage(id).cam_from_world, correspondences)
+                   .Disagrees());
 }
 
 }  // namespace

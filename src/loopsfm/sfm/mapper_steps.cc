@@ -30,15 +30,63 @@ bool MapperState::RegisterImage(image_t image_id, Random& random, MapperReport* 
   AbsolutePoseEstimationOptions pose_options;
   pose_options.max_error_px = options_.abs_pose_max_error_px;
   pose_options.min_num_inliers = options_.abs_pose_min_num_inliers;
-  const AbsolutePoseReport result = EstimateAbsolutePose(
-      points2D, points3D, reconstruction_.GetCamera(image.camera_id), pose_options, random);
+  const Camera& camera = reconstruction_.GetCamera(image.camera_id);
+  AbsolutePoseReport result =
+      EstimateAbsolutePose(points2D, points3D, camera, pose_options, random);
+  auto registrable = [&](const AbsolutePoseReport& pose, size_t num_correspondences) {
+    return pose.success && pose.num_inliers >= options_.abs_pose_min_num_inliers &&
+           pose.num_inliers >= options_.abs_pose_min_inlier_ratio * num_correspondences;
+  };
+  bool accepted = registrable(result, points2D.size());
+  const std::vector<std::pair<point2D_t, point3D_t>> neighbour =
+      accepted ? NeighbourCorrespondences(image_id)
+               : std::vector<std::pair<point2D_t, point3D_t>>{};
+  const NeighbourAgreement agreement =
+      AgreementWithNeighbours(image_id, result.cam_from_world, neighbour);
+  if (agreement.Disagrees()) {
+    // The pose does not see what the frames next to it in capture order see: most of its
+    // inliers are look-alike structure elsewhere in the model (a twin facade). Estimate it
+    // again from the points it shares with those frames, as a tracker would.
+    ++report->num_poses_against_neighbours;
+    std::vector<Eigen::Vector2d> near2D;
+    std::vector<Eigen::Vector3d> near3D;
+    for (const auto& [idx, point] : neighbour) {
+      near2D.push_back(image.points2D[idx].xy);
+      near3D.push_back(reconstruction_.GetPoint3D(point).xyz);
+    }
+    const AbsolutePoseReport local =
+        EstimateAbsolutePose(near2D, near3D, camera, pose_options, random);
+    if (!registrable(local, near2D.size())) {
+      report->seconds_registration += timer.ElapsedSeconds();
+      spdlog::debug("could not register {}: its pose ({} of {} correspondences) fits {} of {} "
+                    "points of the frames next to it, and those points give no pose ({} fit)",
+                    image.name, result.num_inliers, points2D.size(), agreement.num_fit,
+                    agreement.num_checked, local.num_inliers);
+      return false;
+    }
+    ++report->num_poses_from_neighbours;
+    spdlog::debug("{}: its pose ({} of {} correspondences) fits {} of {} points of the frames "
+                  "next to it; registered from those points ({} fit)",
+                  image.name, result.num_inliers, points2D.size(), agreement.num_fit,
+                  agreement.num_checked, local.num_inliers);
+    // Inliers of the new pose over all the correspondences.
+    result.cam_from_world = local.cam_from_world;
+    result.refinement_failed = local.refinement_failed;
+    result.num_inliers = 0;
+    for (size_t k = 0; k < points2D.size(); ++k) {
+      const Eigen::Vector3d in_cam = local.cam_from_world * points3D[k];
+      result.inlier_mask[k] =
+          in_cam.z() > 1e-9 &&
+          (camera.ImgFromCam(in_cam) - points2D[k]).norm() <= options_.abs_pose_max_error_px;
+      result.num_inliers += result.inlier_mask[k];
+    }
+  }
   report->seconds_registration += timer.ElapsedSeconds();
-  if (result.refinement_failed) {
+  if (accepted && result.refinement_failed) {
     ++report->num_failed_pose_refinements;
     spdlog::debug("pose refinement of {} failed; its RANSAC pose is used", image.name);
   }
-  if (!result.success || result.num_inliers < options_.abs_pose_min_num_inliers ||
-      result.num_inliers < options_.abs_pose_min_inlier_ratio * points2D.size()) {
+  if (!accepted) {
     spdlog::debug("could not register {}: {} of {} correspondences fit", image.name,
                   result.num_inliers, points2D.size());
     return false;
