@@ -36,8 +36,7 @@ void AddExportCommand(CLI::App& app) {
     if (!flags->input.empty()) input = flags->input;
     const ExportReport report = ExportRun(flags->output, input, options);
     for (const auto& path : report.written) std::printf("wrote %s\n", path.string().c_str());
-    std::printf("%zu frames, %zu undistorted, %.1f s\n", report.num_images_written,
-                report.num_undistorted_written, report.seconds);
+    std::printf("export: %s\n", report.Counts().c_str());
   });
 }
 

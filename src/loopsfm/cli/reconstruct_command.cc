@@ -28,9 +28,7 @@ void PrintSummary(const ReconstructReport& report) {
     for (const auto& path : report.output.written) {
       written += (written.empty() ? "" : ", ") + path.filename().string();
     }
-    out += fmt::format("{:<28}{} ({} frames, {} undistorted, {:.1f} s)\n", "written", written,
-                       report.output.num_images_written, report.output.num_undistorted_written,
-                       report.output.seconds);
+    out += fmt::format("{:<28}{} ({})\n", "written", written, report.output.Counts());
   }
   for (const CameraSelfCalibration& c : report.self_calibration.cameras) {
     out += fmt::format("{:<28}", fmt::format("self-calibration camera {}", c.camera_id));

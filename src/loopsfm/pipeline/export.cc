@@ -378,4 +378,11 @@ ExportReport ExportRun(const fs::path& output_dir, const std::optional<fs::path>
   return Export(&models, frames, source, output_dir, run_options);
 }
 
+std::string ExportReport::Counts() const {
+  std::string counts;
+  if (num_images_written > 0) counts += fmt::format("{} frames, ", num_images_written);
+  if (num_undistorted_written > 0) counts += fmt::format("{} undistorted, ", num_undistorted_written);
+  return counts + fmt::format("{:.1f} s", seconds);
+}
+
 }  // namespace loopsfm

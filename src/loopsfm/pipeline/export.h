@@ -61,6 +61,8 @@ struct ExportReport {
   size_t num_images_written = 0;
   size_t num_undistorted_written = 0;
   double seconds = 0.0;
+  // "N frames, M undistorted, S s", naming only the images that were written.
+  std::string Counts() const;
 };
 
 // Writes the formats asked for. `frames` are the kept frames' names in capture order;
