@@ -98,6 +98,13 @@ TEST_F(MapperCheckpointFileTest, OtherInputOrOptionsSetTheCheckpointAside) {
   IncrementalMapperOptions other_options = options_;
   other_options.loop_closure.method = LoopClosingMethod::kSplit;
   EXPECT_FALSE(ReadMapperCheckpoint(path, MapperCheckpointFingerprint(problem_.input, other_options)));
+  for (int* window : {&other_options.registration_capture_window,
+                      &other_options.registration_neighbour_window}) {
+    other_options = options_;
+    *window = 0;
+    EXPECT_FALSE(
+        ReadMapperCheckpoint(path, MapperCheckpointFingerprint(problem_.input, other_options)));
+  }
   // The thread count changes only rounding: the checkpoint stays usable.
   other_options = options_;
   other_options.num_threads = 4;
