@@ -107,7 +107,9 @@ class BundleAdjustmentConfig {
   bool HasConstantPose(image_t image_id) const { return constant_poses_.count(image_id) > 0; }
 
   // Fixes some coordinates (0, 1, 2) of an image's cam_from_world translation, e.g. one of
-  // the second image of a two-view start to fix the scale gauge.
+  // the second image of a two-view start to fix the scale gauge. All three make the block
+  // constant; fewer are held by a stiff prior (a step of 1e-6 of the translation's length
+  // costs a pixel), which keeps the block's size and so Ceres' fixed-size Schur kernel.
   void SetConstantTranslationCoords(image_t image_id, std::vector<int> coords);
   void RemoveConstantTranslationCoords(image_t image_id) { constant_translation_.erase(image_id); }
   const std::vector<int>* ConstantTranslationCoords(image_t image_id) const;
