@@ -14,9 +14,11 @@
 #include "database_fuzz_input.h"
 #include "fuzz_util.h"
 #include "loopsfm/math/random.h"
+#include "loopsfm/pipeline/mapper_checkpoint.h"
 #include "loopsfm/retrieval/vocabulary_tree.h"
 #include "loopsfm/scene/dataset_files.h"
 #include "loopsfm/storage/colmap_model.h"
+#include "mapper_checkpoint_fuzz_input.h"
 
 namespace loopsfm::fuzz {
 namespace {
@@ -167,6 +169,59 @@ void WriteDatabaseRows(const fs::path& root) {
   writer.Add("two_view_geometry_unset", Row{Row::kTwoViewGeometries, {0, 2, 0}, {}, ""}.Encode());
 }
 
+// Checkpoints with MapperCheckpointFuzzFingerprint(): mapping finished with one model kept,
+// and mapping under way (a kept model, a growing one, and the mapper's state and report).
+void WriteMapperCheckpoints(const fs::path& root) {
+  CorpusWriter writer(root, "mapper_checkpoint");
+  const fs::path path = ScratchDir() / "mapper_checkpoint.bin";
+  const nlohmann::json fingerprint = MapperCheckpointFuzzFingerprint();
+  MapperCheckpoint::Model kept;
+  kept.state = SmallScene().SaveMapped();
+  kept.gauge1 = 1;
+  kept.gauge2 = 3;
+  MapperCheckpoint finished;
+  finished.finished = true;
+  finished.kept.push_back(kept);
+  finished.report.num_models = 1;
+  finished.report.num_registered = 3;
+  WriteMapperCheckpoint(path, finished, fingerprint);
+  writer.AddWithEdgeCases("finished", ReadBytes(path));
+
+  MapperCheckpoint growing;
+  growing.kept.push_back(kept);
+  growing.kept.back().merge_failures = 1;
+  Reconstruction two_frames = SmallScene();
+  two_frames.DeRegisterImage(3);
+  growing.growing = MapperCheckpoint::Model{two_frames.SaveMapped(), 1, 2, 0};
+  growing.failed_at = {{3, 2}};
+  growing.ever_failed = {3};
+  growing.last_global_size = 2;
+  growing.refined_since_stall = true;
+  growing.tried_initial_pairs = {1, 0, 1};
+  // Short stand-ins for Random::State() (6 kB each, only text to this reader; the mapper
+  // parses them when it resumes).
+  growing.random_state = "7 1 2 3";
+  growing.loop_random_state = "8 1 2 3";
+  growing.loop_window = {1, 2};
+  growing.loop_cooldown = 2;
+  MapperReport& report = growing.report;
+  report.num_registered = 5;
+  report.num_init_trials = 2;
+  report.num_local_ba_iterations = 40;
+  report.seconds_local_ba = 0.25;
+  report.loops_closed.push_back(
+      {"frame_3.png", "frame_1.png", 12, 9, 0.5, 0.1, 2.0, 1.01, 4, 3, 0.125});
+  report.path_before_loop_closing.push_back({"frame_1.png", Rigid3d()});
+  report.registrations.push_back({"frame_2.png", 3, 3, 3, 2, true, 0.01, 0.5});
+  WriteMapperCheckpoint(path, growing, fingerprint);
+  writer.AddWithEdgeCases("growing", ReadBytes(path));
+  WriteMapperCheckpoint(path, MapperCheckpoint(), fingerprint);
+  writer.Add("nothing_mapped", ReadBytes(path));
+  WriteMapperCheckpoint(path, finished, {{"fuzz", 2}});
+  writer.Add("other_fingerprint", ReadBytes(path));
+  writer.Add("empty", "");
+}
+
 }  // namespace
 }  // namespace loopsfm::fuzz
 
@@ -180,5 +235,6 @@ int main(int argc, char** argv) {
   loopsfm::fuzz::WriteDatasetFiles(root);
   loopsfm::fuzz::WriteVocabularyTrees(root);
   loopsfm::fuzz::WriteDatabaseRows(root);
+  loopsfm::fuzz::WriteMapperCheckpoints(root);
   return 0;
 }
