@@ -3,7 +3,9 @@
 #include <cstring>
 #include <fstream>
 #include <iterator>
+#include <limits>
 #include <type_traits>
+#include <utility>
 
 #include "loopsfm/util/errors.h"
 #include "loopsfm/util/logging.h"
@@ -126,6 +128,9 @@ class Reader {
   }
   void GetBytes(void* data, size_t size) {
     if (size > bytes_.size() - offset_) throw InputError("it ends early");
+    // An empty vector's data() may be null, and memcpy from or to null is undefined even
+    // for 0 bytes (a camera saved without parameters).
+    if (size == 0) return;
     std::memcpy(data, bytes_.data() + offset_, size);
     offset_ += size;
   }
@@ -224,6 +229,33 @@ MappedState GetMappedState(Reader& r) {
 
 // ---- JSON header ---------------------------------------------------------------------
 
+// A whole number of type T. nlohmann's get<T>() converts any number unchecked: a float past
+// T's range (1e20, or an integer too long for 64 bits, which it parses as a float) is
+// undefined behaviour, and an integer past it wraps.
+template <typename T>
+T GetInt(const nlohmann::json& j) {
+  static_assert(std::is_integral_v<T>);
+  if (j.is_number_unsigned()) {
+    const auto value = j.get<uint64_t>();
+    if (std::in_range<T>(value)) return static_cast<T>(value);
+  } else if (j.is_number_integer()) {
+    const auto value = j.get<int64_t>();
+    if (std::in_range<T>(value)) return static_cast<T>(value);
+  }
+  throw InputError(fmt::format("its header has {} where a whole number from {} to {} belongs",
+                               j.is_number() ? j.dump() : std::string(j.type_name()),
+                               std::numeric_limits<T>::min(), std::numeric_limits<T>::max()));
+}
+
+template <typename T>
+std::vector<T> GetInts(const nlohmann::json& j) {
+  std::vector<T> values;
+  for (const nlohmann::json& value : j.get_ref<const nlohmann::json::array_t&>()) {
+    values.push_back(GetInt<T>(value));
+  }
+  return values;
+}
+
 nlohmann::json PoseJson(const Rigid3d& pose) {
   const auto& q = pose.rotation.coeffs();
   const auto& t = pose.translation;
@@ -283,17 +315,17 @@ MapperReport ReportFromJson(const nlohmann::json& j) {
   for (int* field : {&r.num_models, &r.num_registered, &r.num_init_trials, &r.num_init_accepted,
                      &r.num_registered_on_retry, &r.num_models_merged, &r.num_models_discarded,
                      &r.num_local_ba, &r.num_global_ba}) {
-    *field = c.at(k++).get<int>();
+    *field = GetInt<int>(c.at(k++));
   }
   for (long long* field : {&r.num_local_ba_iterations, &r.num_local_ba_residuals,
                            &r.num_global_ba_iterations, &r.num_global_ba_residuals}) {
-    *field = c.at(k++).get<long long>();
+    *field = GetInt<long long>(c.at(k++));
   }
   for (int* field : {&r.num_failed_bundles, &r.num_failed_pose_refinements,
                      &r.num_poses_against_neighbours, &r.num_poses_from_neighbours,
                      &r.num_loops_refused, &r.num_split_groups,
                      &r.num_split_groups_refused, &r.num_split_pairs}) {
-    *field = c.at(k++).get<int>();
+    *field = GetInt<int>(c.at(k++));
   }
   const nlohmann::json& s = j.at("seconds");
   k = 0;
@@ -304,18 +336,18 @@ MapperReport ReportFromJson(const nlohmann::json& j) {
   }
   for (const nlohmann::json& l : j.at("loops_closed")) {
     r.loops_closed.push_back({l.at(0).get<std::string>(), l.at(1).get<std::string>(),
-                              l.at(2).get<int>(), l.at(3).get<int>(), l.at(4).get<double>(),
+                              GetInt<int>(l.at(2)), GetInt<int>(l.at(3)), l.at(4).get<double>(),
                               l.at(5).get<double>(), l.at(6).get<double>(), l.at(7).get<double>(),
-                              l.at(8).get<long long>(), l.at(9).get<long long>(),
+                              GetInt<long long>(l.at(8)), GetInt<long long>(l.at(9)),
                               l.at(10).get<double>()});
   }
   for (const nlohmann::json& e : j.at("path_before_loop_closing")) {
     r.path_before_loop_closing.push_back({e.at(0).get<std::string>(), PoseFromJson(e.at(1))});
   }
   for (const nlohmann::json& g : j.at("registrations")) {
-    r.registrations.push_back({g.at(0).get<std::string>(), g.at(1).get<int>(), g.at(2).get<int>(),
-                               g.at(3).get<int>(), g.at(4).get<int>(), g.at(5).get<bool>(),
-                               g.at(6).get<double>(), g.at(7).get<double>()});
+    r.registrations.push_back({g.at(0).get<std::string>(), GetInt<int>(g.at(1)),
+                               GetInt<int>(g.at(2)), GetInt<int>(g.at(3)), GetInt<int>(g.at(4)),
+                               g.at(5).get<bool>(), g.at(6).get<double>(), g.at(7).get<double>()});
   }
   return r;
 }
@@ -326,9 +358,9 @@ nlohmann::json ModelJson(const MapperCheckpoint::Model& model) {
 
 MapperCheckpoint::Model ModelFromJson(const nlohmann::json& j) {
   MapperCheckpoint::Model model;
-  model.gauge1 = j.at("gauge").at(0).get<image_t>();
-  model.gauge2 = j.at("gauge").at(1).get<image_t>();
-  model.merge_failures = j.at("merge_failures").get<int>();
+  model.gauge1 = GetInt<image_t>(j.at("gauge").at(0));
+  model.gauge2 = GetInt<image_t>(j.at("gauge").at(1));
+  model.merge_failures = GetInt<int>(j.at("merge_failures"));
   return model;
 }
 
@@ -360,17 +392,19 @@ MapperCheckpoint CheckpointFromHeader(const nlohmann::json& j) {
   c.finished = j.at("finished").get<bool>();
   for (const nlohmann::json& model : j.at("kept")) c.kept.push_back(ModelFromJson(model));
   if (!j.at("growing").is_null()) c.growing = ModelFromJson(j.at("growing"));
-  c.failed_at = j.at("failed_at").get<std::vector<std::pair<image_t, uint64_t>>>();
-  c.ever_failed = j.at("ever_failed").get<std::vector<image_t>>();
-  c.last_global_size = j.at("last_global_size").get<uint64_t>();
+  for (const nlohmann::json& f : j.at("failed_at").get_ref<const nlohmann::json::array_t&>()) {
+    c.failed_at.emplace_back(GetInt<image_t>(f.at(0)), GetInt<uint64_t>(f.at(1)));
+  }
+  c.ever_failed = GetInts<image_t>(j.at("ever_failed"));
+  c.last_global_size = GetInt<uint64_t>(j.at("last_global_size"));
   c.refined_since_stall = j.at("refined_since_stall").get<bool>();
   for (const char t : j.at("tried_initial_pairs").get<std::string>()) {
     c.tried_initial_pairs.push_back(t == '1' ? 1 : 0);
   }
   c.random_state = j.at("random_state").get<std::string>();
   c.loop_random_state = j.at("loop_random_state").get<std::string>();
-  c.loop_window = j.at("loop_window").get<std::vector<image_t>>();
-  c.loop_cooldown = j.at("loop_cooldown").get<int>();
+  c.loop_window = GetInts<image_t>(j.at("loop_window"));
+  c.loop_cooldown = GetInt<int>(j.at("loop_cooldown"));
   c.report = ReportFromJson(j.at("report"));
   return c;
 }

@@ -2,6 +2,7 @@
 
 #include <gtest/gtest.h>
 
+#include <cstring>
 #include <fstream>
 #include <iterator>
 
@@ -140,6 +141,41 @@ TEST_F(MapperCheckpointFileTest, DamagedFilesAreSetAside) {
   EXPECT_FALSE(ReadMapperCheckpoint(path, fingerprint)) << "huge count";
   WriteBytes(path, std::string(5000, '\x7f'));
   EXPECT_FALSE(ReadMapperCheckpoint(path, fingerprint)) << "garbage";
+}
+
+// A whole number of the header out of its field's range or not whole is set aside (a float
+// past an int's range was undefined behaviour in nlohmann's conversion; an integer past it
+// wrapped; fuzz findings).
+TEST_F(MapperCheckpointFileTest, HeaderNumbersOutOfRangeAreSetAside) {
+  const nlohmann::json fingerprint = MapperCheckpointFingerprint(problem_.input, options_);
+  const fs::path path = dir_ / "mapper_checkpoint.bin";
+  WriteMapperCheckpoint(path, checkpoints_[checkpoints_.size() / 2], fingerprint);
+  const std::string bytes = ReadBytes(path);
+  // The header's length after the 26-byte magic and the version, then the header.
+  uint64_t size = 0;
+  std::memcpy(&size, bytes.data() + 30, sizeof(size));
+  const nlohmann::json header = nlohmann::json::parse(bytes.substr(38, size));
+  auto write_with = [&](const nlohmann::json& changed) {
+    const std::string text = changed.dump();
+    const uint64_t new_size = text.size();
+    const std::string length(reinterpret_cast<const char*>(&new_size), sizeof(new_size));
+    WriteBytes(path, bytes.substr(0, 30) + length + text + bytes.substr(38 + size));
+  };
+  write_with(header);
+  ASSERT_TRUE(ReadMapperCheckpoint(path, fingerprint).has_value());
+  for (const auto& [key, value] : {std::pair<std::string, nlohmann::json>{"loop_cooldown", 1e300},
+                                   {"loop_cooldown", 2.5},
+                                   {"last_global_size", -1},
+                                   {"loop_window", {4294967296ull}}}) {
+    nlohmann::json changed = header;
+    changed[key] = value;
+    write_with(changed);
+    EXPECT_FALSE(ReadMapperCheckpoint(path, fingerprint)) << key << " " << value.dump();
+  }
+  nlohmann::json changed = header;
+  changed["report"]["counts"][0] = 1e20;
+  write_with(changed);
+  EXPECT_FALSE(ReadMapperCheckpoint(path, fingerprint)) << "a report count of 1e20";
 }
 
 }  // namespace
