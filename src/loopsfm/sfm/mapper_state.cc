@@ -5,6 +5,7 @@
 #include <limits>
 #include <tuple>
 
+#include "loopsfm/estimators/reprojection.h"
 #include "loopsfm/geometry/triangulation.h"
 #include "loopsfm/util/errors.h"
 
@@ -338,12 +339,12 @@ MapperState::NeighbourAgreement MapperState::AgreementWithNeighbours(
   NeighbourAgreement agreement;
   const Image& image = reconstruction_.GetImage(image_id);
   const Camera& camera = reconstruction_.GetCamera(image.camera_id);
+  const double max_error_sq = options_.abs_pose_max_error_px * options_.abs_pose_max_error_px;
   for (const auto& [own, point] : correspondences) {
     ++agreement.num_checked;
-    const Eigen::Vector3d in_cam = cam_from_world * reconstruction_.GetPoint3D(point).xyz;
-    if (in_cam.z() <= 1e-9) continue;
-    const double error = (camera.ImgFromCam(in_cam) - image.points2D[own].xy).norm();
-    if (error <= options_.abs_pose_max_error_px) ++agreement.num_fit;
+    agreement.num_fit += CalculateSquaredReprojectionError(
+                             image.points2D[own].xy, reconstruction_.GetPoint3D(point).xyz,
+                             cam_from_world, camera) <= max_error_sq;
   }
   return agreement;
 }

@@ -6,6 +6,7 @@
 #include "loopsfm/estimators/absolute_pose.h"
 #include "loopsfm/estimators/bundle_adjustment.h"
 #include "loopsfm/estimators/cost_functions/focal_prior.h"
+#include "loopsfm/estimators/reprojection.h"
 #include "loopsfm/sfm/mapper_state.h"
 #include "loopsfm/util/logging.h"
 #include "loopsfm/util/timer.h"
@@ -37,7 +38,7 @@ bool MapperState::RegisterImage(image_t image_id, Random& random, MapperReport* 
     return pose.success && pose.num_inliers >= options_.abs_pose_min_num_inliers &&
            pose.num_inliers >= options_.abs_pose_min_inlier_ratio * num_correspondences;
   };
-  bool accepted = registrable(result, points2D.size());
+  const bool accepted = registrable(result, points2D.size());
   const std::vector<std::pair<point2D_t, point3D_t>> neighbour =
       accepted ? NeighbourCorrespondences(image_id)
                : std::vector<std::pair<point2D_t, point3D_t>>{};
@@ -73,11 +74,11 @@ bool MapperState::RegisterImage(image_t image_id, Random& random, MapperReport* 
     result.cam_from_world = local.cam_from_world;
     result.refinement_failed = local.refinement_failed;
     result.num_inliers = 0;
+    const double max_error_sq = options_.abs_pose_max_error_px * options_.abs_pose_max_error_px;
     for (size_t k = 0; k < points2D.size(); ++k) {
-      const Eigen::Vector3d in_cam = local.cam_from_world * points3D[k];
-      result.inlier_mask[k] =
-          in_cam.z() > 1e-9 &&
-          (camera.ImgFromCam(in_cam) - points2D[k]).norm() <= options_.abs_pose_max_error_px;
+      result.inlier_mask[k] = CalculateSquaredReprojectionError(
+                                  points2D[k], points3D[k], local.cam_from_world, camera) <=
+                              max_error_sq;
       result.num_inliers += result.inlier_mask[k];
     }
   }
