@@ -31,12 +31,16 @@ MapperState::MapperState(const MapperInput& input, const IncrementalMapperOption
     pairs_of_[pair.pair.image_id1].push_back(&pair);
     pairs_of_[pair.pair.image_id2].push_back(&pair);
   }
+  track_frame_begin_.reserve(input.tracks.size() + 1);
+  track_frame_begin_.push_back(0);
   for (size_t t = 0; t < input.tracks.size(); ++t) {
     for (const TrackElement& el : input.tracks[t].elements) {
       auto it = track_of_.find(el.image_id);
       LOOPSFM_CHECK(it != track_of_.end() && el.point2D_idx < it->second.size());
       it->second[el.point2D_idx] = static_cast<int>(t);
+      track_frames_.push_back(capture_index_.at(el.image_id));
     }
+    track_frame_begin_.push_back(static_cast<int>(track_frames_.size()));
   }
 }
 
@@ -350,17 +354,29 @@ MapperState::NeighbourAgreement MapperState::AgreementWithNeighbours(
 }
 
 std::unordered_map<image_t, size_t> MapperState::CountVisibleTracks() const {
-  std::unordered_map<image_t, size_t> counts;
+  // Called before every registration, over every point of the model: flat arrays by capture
+  // index, so that a track element costs no hash lookup.
+  const size_t num_frames = input_.frames.size();
+  std::vector<char> registered(num_frames);
+  for (size_t k = 0; k < num_frames; ++k) {
+    registered[k] = reconstruction_.IsRegistered(input_.frames[k].image_id);
+  }
+  std::vector<size_t> counts(num_frames, 0);
   std::vector<char> seen(input_.tracks.size(), 0);
   for (const auto& [id, point] : reconstruction_.Points3D()) {
-    const int track = TrackOfPoint(id);
+    const TrackElement& first = point.track.elements.front();
+    const int track = TrackOf(first.image_id, first.point2D_idx);
     if (track < 0 || seen[track]) continue;
     seen[track] = 1;
-    for (const TrackElement& el : input_.tracks[track].elements) {
-      if (!reconstruction_.IsRegistered(el.image_id)) ++counts[el.image_id];
+    for (int e = track_frame_begin_[track]; e < track_frame_begin_[track + 1]; ++e) {
+      if (!registered[track_frames_[e]]) ++counts[track_frames_[e]];
     }
   }
-  return counts;
+  std::unordered_map<image_t, size_t> visible;
+  for (size_t k = 0; k < num_frames; ++k) {
+    if (counts[k] > 0) visible[input_.frames[k].image_id] = counts[k];
+  }
+  return visible;
 }
 
 }  // namespace loopsfm

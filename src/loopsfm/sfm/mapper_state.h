@@ -121,6 +121,9 @@ class MapperState {
   // Position of each frame in capture order, and the verified pairs of each frame.
   std::unordered_map<image_t, int> capture_index_;
   std::unordered_map<image_t, std::vector<const MapperPair*>> pairs_of_;
+  // Capture indices of the frames of track t: track_frames_[track_frame_begin_[t] ..
+  // track_frame_begin_[t + 1]).
+  std::vector<int> track_frame_begin_, track_frames_;
   image_t gauge1_ = kInvalidImageId, gauge2_ = kInvalidImageId;
 };
 
