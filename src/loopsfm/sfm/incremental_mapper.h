@@ -131,7 +131,11 @@ struct IncrementalMapperOptions {
   // Local bundle adjustment: the new frame and this many frames sharing most points with it.
   int local_ba_num_images = 6;
   // Global bundle adjustment when the registered frame count has grown by this fraction.
-  double global_ba_growth = 0.25;
+  // Video frames register in order with a local bundle each, so drift between two global
+  // bundles stays small: 0.5 against 0.25 gave the same accuracy on block, fox, kitti07_160
+  // and templeRing (ATE within 1.3 %, focal within 0.02 %) with 14 global bundles on block
+  // instead of 23 (their time -39 %).
+  double global_ba_growth = 0.5;
   // What global bundle adjustments refine of cameras without a prior focal length (guessed
   // or self-calibrated), and of cameras with known intrinsics (--intrinsics). Local bundles
   // hold every camera fixed. Focal lengths are refined once a model has 5 frames, the
