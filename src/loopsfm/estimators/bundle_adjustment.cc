@@ -415,7 +415,6 @@ double* BundleAdjuster::PoseTranslationBlock(image_t image_id) {
 
 double* BundleAdjuster::PointBlock(point3D_t point3D_id) {
   LOOPSFM_CHECK_MSG(problem_ != nullptr, "BundleAdjuster::SetUp must be called first");
-  points_handed_out_ = true;
   double* xyz = reconstruction_->GetPoint3D(point3D_id).xyz.data();
   if (!problem_->HasParameterBlock(xyz)) {
     problem_->AddParameterBlock(xyz, 3);
@@ -434,29 +433,6 @@ double* BundleAdjuster::CameraBlock(camera_t camera_id) {
     problem_->SetParameterBlockConstant(params);
   }
   return params;
-}
-
-std::shared_ptr<ceres::ParameterBlockOrdering> BundleAdjuster::SchurOrdering() const {
-  // Only the adjuster's own residuals: each holds one point. Extra terms may tie points
-  // together only through PointBlock(); then Ceres finds an independent set itself.
-  if (points_handed_out_) return nullptr;
-  auto ordering = std::make_shared<ceres::ParameterBlockOrdering>();
-  for (const point3D_t id : points_added_) {
-    double* xyz = reconstruction_->GetPoint3D(id).xyz.data();
-    if (problem_->HasParameterBlock(xyz)) ordering->AddElementToGroup(xyz, 0);
-  }
-  for (const image_t image_id : pose_blocks_) {
-    Rigid3d& pose = reconstruction_->GetImage(image_id).cam_from_world;
-    ordering->AddElementToGroup(pose.rotation.coeffs().data(), 1);
-    ordering->AddElementToGroup(pose.translation.data(), 1);
-  }
-  for (const camera_t camera_id : cameras_added_) {
-    double* params = reconstruction_->GetCamera(camera_id).params.data();
-    if (problem_->HasParameterBlock(params)) ordering->AddElementToGroup(params, 1);
-  }
-  // A block added outside these (by an extra term): let Ceres order.
-  if (ordering->NumElements() != problem_->NumParameterBlocks()) return nullptr;
-  return ordering;
 }
 
 void BundleAdjuster::ConfigureSolver(ceres::Solver::Options* solver_options) {
@@ -510,8 +486,6 @@ void BundleAdjuster::ConfigureSolver(ceres::Solver::Options* solver_options) {
       solver_options->linear_solver_type = ceres::DENSE_QR;
     }
   }
-
-  if (!points_added_.empty()) solver_options->linear_solver_ordering = SchurOrdering();
 
   solver_options->max_num_iterations = options_.max_num_iterations;
   solver_options->max_linear_solver_iterations = options_.max_linear_solver_iterations;

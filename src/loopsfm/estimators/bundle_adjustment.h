@@ -194,9 +194,6 @@ class BundleAdjuster {
   // variable otherwise. Must be called after SetUp.
   double* PoseRotationBlock(image_t image_id);     // 4: Eigen quaternion x, y, z, w
   double* PoseTranslationBlock(image_t image_id);  // 3
-  // Extra residuals may tie points to each other only through PointBlock(): until it is
-  // called every residual holds at most one point, and the Schur solvers eliminate all
-  // points in an order given to Ceres (no search for an independent set per solve).
   double* PointBlock(point3D_t point3D_id);        // 3
   double* CameraBlock(camera_t camera_id);         // Model::kNumParams
   // Whether a pose's blocks are in the problem. Poses held constant by the config get
@@ -219,9 +216,6 @@ class BundleAdjuster {
   void AddPoseBlocks(image_t image_id);
   void ParameterizeCameras();
   void ConfigureSolver(ceres::Solver::Options* solver_options);
-  // Points first, then poses and cameras; nullptr where extra terms may link points or
-  // added blocks the adjuster does not know.
-  std::shared_ptr<ceres::ParameterBlockOrdering> SchurOrdering() const;
 
   BundleAdjustmentOptions options_;
   BundleAdjustmentConfig config_;
@@ -234,8 +228,6 @@ class BundleAdjuster {
   std::unordered_set<camera_t> cameras_added_;
   // Cameras used by images of the config: the ones whose intrinsics may be refined.
   std::unordered_set<camera_t> config_cameras_;
-  // PointBlock() was called: extra terms may tie points together.
-  bool points_handed_out_ = false;
   ceres::Solver::Summary summary_;
   BundleAdjustmentReport report_;
 };

@@ -511,41 +511,6 @@ TEST(BundleAdjustment, ExtraDistanceResidualFixesTheScale) {
   }
 }
 
-// The adjuster's own residuals hold one point each: points are eliminated in the order it
-// gives (Ceres' "Linear solver ordering" line shows the group sizes, not AUTOMATIC). Once
-// extra terms may tie points together (PointBlock), Ceres orders them itself.
-TEST(BundleAdjustment, SchurOrderingIsGivenUnlessExtraTermsTiePoints) {
-  const Reconstruction truth = MakeArcScene(CameraModelId::kPinhole, 12, 300, 15);
-  Reconstruction reconstruction = truth;
-  Perturb(&reconstruction, {1, 2}, 0.8, 0.03, 0.03, 16);
-  BundleAdjustmentConfig config = AllImagesConfig(reconstruction);
-  FixGaugeWithTwoImages(reconstruction, 1, 2, &config);
-  BundleAdjuster adjuster(BundleAdjustmentOptions::Global(), config);
-  ASSERT_TRUE(adjuster.Solve(&reconstruction)) << adjuster.FullReport();
-  const std::string given = adjuster.FullReport();
-  const size_t line = given.find("Linear solver ordering");
-  ASSERT_NE(line, std::string::npos);
-  const std::string ordering_line = given.substr(line, given.find('\n', line) - line);
-  EXPECT_EQ(ordering_line.find("AUTOMATIC"), std::string::npos) << ordering_line;
-  EXPECT_NE(ordering_line.find(std::to_string(truth.NumPoints3D()) + ","), std::string::npos)
-      << ordering_line;
-  EXPECT_LT(MeanReprojectionError(reconstruction), 1e-6);
-
-  Reconstruction tied = truth;
-  Perturb(&tied, {1, 2}, 0.8, 0.03, 0.03, 16);
-  BundleAdjuster tying(BundleAdjustmentOptions::Global(), config);
-  tying.SetUp(&tied);
-  auto it = truth.Points3D().begin();
-  const point3D_t id_a = (it++)->first;
-  const point3D_t id_b = it->first;
-  const double distance = (truth.GetPoint3D(id_a).xyz - truth.GetPoint3D(id_b).xyz).norm();
-  tying.problem().AddResidualBlock(PointDistanceCost::Create(distance, 10.0), nullptr,
-                                   tying.PointBlock(id_a), tying.PointBlock(id_b));
-  ASSERT_TRUE(tying.Solve(&tied)) << tying.FullReport();
-  EXPECT_NE(tying.FullReport().find("AUTOMATIC"), std::string::npos);
-  EXPECT_LT(MeanReprojectionError(tied), 1e-6);
-}
-
 TEST(BundleAdjustment, PoseGraphThroughBlockAccessors) {
   const Reconstruction truth = MakeArcScene(CameraModelId::kPinhole, 8, 50, 17);
   Reconstruction reconstruction = truth;
