@@ -49,7 +49,11 @@ int MapperState::TrackOf(image_t image_id, point2D_t idx) const {
 }
 
 int MapperState::TrackOfPoint(point3D_t point3D_id) const {
-  const TrackElement& first = reconstruction_.GetPoint3D(point3D_id).track.elements.front();
+  return TrackOfPoint(reconstruction_.GetPoint3D(point3D_id));
+}
+
+int MapperState::TrackOfPoint(const Point3D& point) const {
+  const TrackElement& first = point.track.elements.front();
   return TrackOf(first.image_id, first.point2D_idx);
 }
 
@@ -364,8 +368,7 @@ std::unordered_map<image_t, size_t> MapperState::CountVisibleTracks() const {
   std::vector<size_t> counts(num_frames, 0);
   std::vector<char> seen(input_.tracks.size(), 0);
   for (const auto& [id, point] : reconstruction_.Points3D()) {
-    const TrackElement& first = point.track.elements.front();
-    const int track = TrackOf(first.image_id, first.point2D_idx);
+    const int track = TrackOfPoint(point);
     if (track < 0 || seen[track]) continue;
     seen[track] = 1;
     for (int e = track_frame_begin_[track]; e < track_frame_begin_[track + 1]; ++e) {

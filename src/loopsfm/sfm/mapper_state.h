@@ -35,6 +35,7 @@ class MapperState {
   int TrackOf(image_t image_id, point2D_t idx) const;
   // The original track a 3D point was made from.
   int TrackOfPoint(point3D_t point3D_id) const;
+  int TrackOfPoint(const Point3D& point) const;
   // The 3D points made from track t (none, one, or several when parts of it disagree).
   std::vector<point3D_t> PointsOfTrack(int track) const;
 

@@ -100,10 +100,7 @@ class ReprojectionErrorConstantCameraCost : public ceres::SizedCostFunction<2, 4
  public:
   ReprojectionErrorConstantCameraCost(const std::vector<double>& camera_params,
                                       const Eigen::Vector2d& observed)
-      : observed_(observed) {
-    std::copy(camera_params.begin(), camera_params.begin() + CameraModel::kNumParams,
-              params_.begin());
-  }
+      : camera_(camera_params), observed_(observed) {}
 
   static ceres::CostFunction* Create(const std::vector<double>& camera_params,
                                      const Eigen::Vector2d& observed) {
@@ -120,16 +117,16 @@ class ReprojectionErrorConstantCameraCost : public ceres::SizedCostFunction<2, 4
     const Eigen::Vector3d point_in_cam = point + 2.0 * (w * a + u.cross(a)) + translation;
 
     if (jacobians == nullptr) {
-      ProjectionResidual<CameraModel, double>(params_.data(), point_in_cam, observed_, residuals);
+      ProjectionResidual<CameraModel, double>(camera_.template As<double>().data(), point_in_cam,
+                                              observed_, residuals);
       return true;
     }
     using Jet3 = ceres::Jet<double, 3>;
-    std::array<Jet3, CameraModel::kNumParams> params;
-    for (int i = 0; i < CameraModel::kNumParams; ++i) params[i] = Jet3(params_[i]);
     const Eigen::Matrix<Jet3, 3, 1> p(Jet3(point_in_cam[0], 0), Jet3(point_in_cam[1], 1),
                                       Jet3(point_in_cam[2], 2));
     Jet3 projected[2];
-    ProjectionResidual<CameraModel, Jet3>(params.data(), p, observed_, projected);
+    ProjectionResidual<CameraModel, Jet3>(camera_.template As<Jet3>().data(), p, observed_,
+                                          projected);
     Eigen::Matrix<double, 2, 3, Eigen::RowMajor> d_projected;  // d residual / d point_in_cam
     for (int r = 0; r < 2; ++r) {
       residuals[r] = projected[r].a;
@@ -166,7 +163,7 @@ class ReprojectionErrorConstantCameraCost : public ceres::SizedCostFunction<2, 4
     return m;
   }
 
-  std::array<double, CameraModel::kNumParams> params_;
+  CameraParamsData<CameraModel> camera_;
   Eigen::Vector2d observed_;
 };
 
