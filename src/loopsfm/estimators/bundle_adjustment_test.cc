@@ -670,41 +670,50 @@ TEST_P(ReprojectionCostTest, MatchesCameraProjectionAndFiniteDifferences) {
   ExpectJacobiansMatchFiniteDifferences(*constant_pose_camera, only_point);
 }
 
-// The constant-camera cost's hand-written derivatives against automatic differentiation of
-// the full cost (its first three blocks), at a unit quaternion and at one off the unit
-// sphere, where both differentiate the same expression.
-TEST_P(ReprojectionCostTest, ConstantCameraDerivativesEqualAutomaticDifferentiation) {
+// The hand-written derivatives of the full cost and of the constant-camera cost against
+// automatic differentiation of the definition (ReprojectionErrorAutoDiff), at a unit
+// quaternion and at one off the unit sphere, where all differentiate the same expression.
+TEST_P(ReprojectionCostTest, AnalyticDerivativesEqualAutomaticDifferentiation) {
   const Camera camera = MakeCamera(GetParam(), 500.0);
   Random random(31);
   const Eigen::Vector2d observed(310.0, 190.0);
+  std::unique_ptr<ceres::CostFunction> reference(
+      CreateReprojectionErrorAutoDiffCost(camera.model_id, observed));
   std::unique_ptr<ceres::CostFunction> full(CreateReprojectionErrorCost(camera.model_id, observed));
   std::unique_ptr<ceres::CostFunction> constant_camera(
       CreateReprojectionErrorConstantCameraCost(camera.model_id, camera.params, observed));
+  const int sizes[] = {4, 3, 3, static_cast<int>(camera.params.size())};
   for (const double quaternion_scale : {1.0, 1.3}) {
     const Eigen::Vector4d q = SmallRotation(random, 35.0).coeffs() * quaternion_scale;
     const Eigen::Vector3d t(0.3, -0.2, 0.5), point(-0.6, 0.4, 3.5);
     const double* parameters[] = {q.data(), t.data(), point.data(), camera.params.data()};
-    std::vector<std::vector<double>> expected(4), actual(3);
-    std::vector<double*> expected_ptrs, actual_ptrs;
-    const int sizes[] = {4, 3, 3, static_cast<int>(camera.params.size())};
+    std::vector<std::vector<double>> expected(4);
+    std::vector<double*> expected_ptrs;
     for (int b = 0; b < 4; ++b) {
       expected[b].resize(2 * sizes[b]);
       expected_ptrs.push_back(expected[b].data());
-      if (b < 3) {
+    }
+    Eigen::Vector2d expected_residuals;
+    ASSERT_TRUE(reference->Evaluate(parameters, expected_residuals.data(), expected_ptrs.data()));
+    for (const ceres::CostFunction* cost : {full.get(), constant_camera.get()}) {
+      const int num_blocks = static_cast<int>(cost->parameter_block_sizes().size());
+      std::vector<std::vector<double>> actual(num_blocks);
+      std::vector<double*> actual_ptrs;
+      for (int b = 0; b < num_blocks; ++b) {
         actual[b].resize(2 * sizes[b]);
         actual_ptrs.push_back(actual[b].data());
       }
-    }
-    Eigen::Vector2d expected_residuals, actual_residuals;
-    ASSERT_TRUE(full->Evaluate(parameters, expected_residuals.data(), expected_ptrs.data()));
-    ASSERT_TRUE(
-        constant_camera->Evaluate(parameters, actual_residuals.data(), actual_ptrs.data()));
-    EXPECT_LT((actual_residuals - expected_residuals).norm(),
-              1e-12 * std::max(1.0, expected_residuals.norm()));
-    for (int b = 0; b < 3; ++b) {
-      for (int k = 0; k < 2 * sizes[b]; ++k) {
-        EXPECT_NEAR(actual[b][k], expected[b][k], 1e-10 * std::max(1.0, std::abs(expected[b][k])))
-            << "scale " << quaternion_scale << " block " << b << " entry " << k;
+      Eigen::Vector2d actual_residuals;
+      ASSERT_TRUE(cost->Evaluate(parameters, actual_residuals.data(), actual_ptrs.data()));
+      EXPECT_LT((actual_residuals - expected_residuals).norm(),
+                1e-12 * std::max(1.0, expected_residuals.norm()));
+      for (int b = 0; b < num_blocks; ++b) {
+        for (int k = 0; k < 2 * sizes[b]; ++k) {
+          EXPECT_NEAR(actual[b][k], expected[b][k],
+                      1e-10 * std::max(1.0, std::abs(expected[b][k])))
+              << num_blocks << " blocks, scale " << quaternion_scale << " block " << b
+              << " entry " << k;
+        }
       }
     }
   }

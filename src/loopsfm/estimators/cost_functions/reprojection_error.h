@@ -12,8 +12,8 @@
 // constant-camera variants store the camera parameters and drop the last block. A constant
 // block is cheaper as data than as a constant parameter block: automatic differentiation
 // would still carry its derivatives (14 per residual instead of 10 for a posed image with a
-// known camera, 7 instead of 3 for an anchoring observation). The constant-camera cost, the
-// one bundles evaluate most, has analytic derivatives instead.
+// known camera, 7 instead of 3 for an anchoring observation). The two costs with a pose and a
+// point, the ones bundles evaluate most, have analytic derivatives instead.
 //
 // A point behind the camera still yields a finite residual (no cheirality test), as in
 // COLMAP; the mapper removes such observations by their reprojection error.
@@ -61,15 +61,17 @@ class CameraParamsData {
   std::array<double, CameraModel::kNumParams> params_;
 };
 
+// The definition of the reprojection error, for automatic differentiation: the reference
+// that the analytic costs below are tested against (to rounding).
 template <typename CameraModel>
-class ReprojectionErrorCost {
+class ReprojectionErrorAutoDiff {
  public:
-  explicit ReprojectionErrorCost(const Eigen::Vector2d& observed) : observed_(observed) {}
+  explicit ReprojectionErrorAutoDiff(const Eigen::Vector2d& observed) : observed_(observed) {}
 
   static ceres::CostFunction* Create(const Eigen::Vector2d& observed) {
-    return new ceres::AutoDiffCostFunction<ReprojectionErrorCost, 2, 4, 3, 3,
+    return new ceres::AutoDiffCostFunction<ReprojectionErrorAutoDiff, 2, 4, 3, 3,
                                            CameraModel::kNumParams>(
-        new ReprojectionErrorCost(observed));
+        new ReprojectionErrorAutoDiff(observed));
   }
 
   template <typename T>
@@ -87,14 +89,118 @@ class ReprojectionErrorCost {
   Eigen::Vector2d observed_;
 };
 
+// A world point in a camera, p = R(q) X + t, with Eigen's quaternion rotation written out,
+// X + 2 w (u x X) + 2 u x (u x X) with q = (u, w), and its derivatives by hand: the pose and
+// point half of the analytic costs below. (Automatic differentiation would carry the
+// derivatives of all ten pose and point parameters through the rotation.)
+class PointInCameraWithDerivatives {
+ public:
+  PointInCameraWithDerivatives(const double* rotation, const double* translation,
+                               const double* point)
+      : u_(rotation), w_(rotation[3]), point_(point), u_cross_point_(u_.cross(point_)) {
+    point_in_cam_ = point_ + 2.0 * (w_ * u_cross_point_ + u_.cross(u_cross_point_)) +
+                    Eigen::Map<const Eigen::Vector3d>(translation);
+  }
+
+  const Eigen::Vector3d& point_in_cam() const { return point_in_cam_; }
+
+  // Chain rule: from d residual / d p (2x3) to the rotation, translation and point blocks
+  // (jacobians[0..2], Ceres' row-major layout; a null entry is skipped).
+  void Chain(const Eigen::Matrix<double, 2, 3, Eigen::RowMajor>& d_projected,
+             double** jacobians) const {
+    if (jacobians[0] != nullptr) {
+      // d p / d u = 2 (-w [X]x + (u.X) I - 2 X u^T + u X^T);  d p / d w = 2 (u x X).
+      Eigen::Matrix<double, 3, 4> d_rotation;
+      d_rotation.leftCols<3>() =
+          2.0 * (-w_ * CrossMatrix(point_) + u_.dot(point_) * Eigen::Matrix3d::Identity() -
+                 2.0 * point_ * u_.transpose() + u_ * point_.transpose());
+      d_rotation.col(3) = 2.0 * u_cross_point_;
+      Eigen::Map<Eigen::Matrix<double, 2, 4, Eigen::RowMajor>> d_q(jacobians[0]);
+      d_q = d_projected * d_rotation;
+    }
+    if (jacobians[1] != nullptr) {
+      Eigen::Map<Eigen::Matrix<double, 2, 3, Eigen::RowMajor>> d_t(jacobians[1]);
+      d_t = d_projected;
+    }
+    if (jacobians[2] != nullptr) {
+      // d p / d X = I + 2 w [u]x + 2 [u]x [u]x (the rotation matrix when |q| = 1).
+      const Eigen::Matrix3d u_cross = CrossMatrix(u_);
+      Eigen::Map<Eigen::Matrix<double, 2, 3, Eigen::RowMajor>> d_x(jacobians[2]);
+      d_x = d_projected *
+          (Eigen::Matrix3d::Identity() + 2.0 * w_ * u_cross + 2.0 * u_cross * u_cross);
+    }
+  }
+
+ private:
+  static Eigen::Matrix3d CrossMatrix(const Eigen::Vector3d& v) {
+    Eigen::Matrix3d m;
+    m << 0.0, -v.z(), v.y(), v.z(), 0.0, -v.x(), -v.y(), v.x(), 0.0;
+    return m;
+  }
+
+  Eigen::Map<const Eigen::Vector3d> u_;
+  double w_;
+  Eigen::Map<const Eigen::Vector3d> point_;
+  Eigen::Vector3d u_cross_point_;
+  Eigen::Vector3d point_in_cam_;
+};
+
+// The cost of an observation whose camera parameters are refined (global bundles without
+// known intrinsics), with analytic derivatives: the projection's derivatives with respect to
+// the point in the camera and the camera parameters come from the camera model through one
+// Jet of 3 + kNumParams components (7 for SIMPLE_RADIAL, where automatic differentiation of
+// the whole cost carries 14), the pose and point ones from PointInCameraWithDerivatives.
+template <typename CameraModel>
+class ReprojectionErrorCost
+    : public ceres::SizedCostFunction<2, 4, 3, 3, CameraModel::kNumParams> {
+ public:
+  explicit ReprojectionErrorCost(const Eigen::Vector2d& observed) : observed_(observed) {}
+
+  static ceres::CostFunction* Create(const Eigen::Vector2d& observed) {
+    return new ReprojectionErrorCost(observed);
+  }
+
+  bool Evaluate(double const* const* parameters, double* residuals,
+                double** jacobians) const override {
+    const PointInCameraWithDerivatives posed(parameters[0], parameters[1], parameters[2]);
+    const double* camera_params = parameters[3];
+    if (jacobians == nullptr) {
+      ProjectionResidual<CameraModel, double>(camera_params, posed.point_in_cam(), observed_,
+                                              residuals);
+      return true;
+    }
+    constexpr int kNumParams = CameraModel::kNumParams;
+    using Jet = ceres::Jet<double, 3 + kNumParams>;
+    const Eigen::Matrix<Jet, 3, 1> p(Jet(posed.point_in_cam()[0], 0),
+                                     Jet(posed.point_in_cam()[1], 1),
+                                     Jet(posed.point_in_cam()[2], 2));
+    std::array<Jet, kNumParams> params;
+    for (int i = 0; i < kNumParams; ++i) params[i] = Jet(camera_params[i], 3 + i);
+    Jet projected[2];
+    ProjectionResidual<CameraModel, Jet>(params.data(), p, observed_, projected);
+    Eigen::Matrix<double, 2, 3, Eigen::RowMajor> d_projected;  // d residual / d point_in_cam
+    for (int r = 0; r < 2; ++r) {
+      residuals[r] = projected[r].a;
+      d_projected.row(r) = projected[r].v.template head<3>().transpose();
+      if (jacobians[3] != nullptr) {
+        Eigen::Map<Eigen::Matrix<double, 1, kNumParams>> d_camera(jacobians[3] + r * kNumParams);
+        d_camera = projected[r].v.template tail<kNumParams>().transpose();
+      }
+    }
+    posed.Chain(d_projected, jacobians);
+    return true;
+  }
+
+ private:
+  Eigen::Vector2d observed_;
+};
+
 // The camera as data, with analytic derivatives: the cost of every observation in a bundle
 // that holds its cameras fixed (all local bundles, and global ones with known intrinsics),
-// so the one evaluated most. The point in the camera, p = R(q) X + t, is Eigen's
-// quaternion rotation written out, X + 2 w (u x X) + 2 u x (u x X) with q = (u, w), and
-// differentiated by hand; the projection's 2x3 derivative comes from the camera model
-// through a 3-component Jet. Same values as automatic differentiation of the same
-// expression (to rounding), in about a third of the time: a 10-component Jet through
-// the rotation is what it replaces.
+// so the one evaluated most. The projection's 2x3 derivative comes from the camera model
+// through a 3-component Jet; the rest as in ReprojectionErrorCost. Same values as automatic
+// differentiation of the same expression (to rounding), in about a third of the time: a
+// 10-component Jet through the rotation is what it replaces.
 template <typename CameraModel>
 class ReprojectionErrorConstantCameraCost : public ceres::SizedCostFunction<2, 4, 3, 3> {
  public:
@@ -109,21 +215,16 @@ class ReprojectionErrorConstantCameraCost : public ceres::SizedCostFunction<2, 4
 
   bool Evaluate(double const* const* parameters, double* residuals,
                 double** jacobians) const override {
-    const Eigen::Map<const Eigen::Vector3d> u(parameters[0]);
-    const double w = parameters[0][3];
-    const Eigen::Map<const Eigen::Vector3d> translation(parameters[1]);
-    const Eigen::Map<const Eigen::Vector3d> point(parameters[2]);
-    const Eigen::Vector3d a = u.cross(point);
-    const Eigen::Vector3d point_in_cam = point + 2.0 * (w * a + u.cross(a)) + translation;
-
+    const PointInCameraWithDerivatives posed(parameters[0], parameters[1], parameters[2]);
     if (jacobians == nullptr) {
-      ProjectionResidual<CameraModel, double>(camera_.template As<double>().data(), point_in_cam,
-                                              observed_, residuals);
+      ProjectionResidual<CameraModel, double>(camera_.template As<double>().data(),
+                                              posed.point_in_cam(), observed_, residuals);
       return true;
     }
     using Jet3 = ceres::Jet<double, 3>;
-    const Eigen::Matrix<Jet3, 3, 1> p(Jet3(point_in_cam[0], 0), Jet3(point_in_cam[1], 1),
-                                      Jet3(point_in_cam[2], 2));
+    const Eigen::Matrix<Jet3, 3, 1> p(Jet3(posed.point_in_cam()[0], 0),
+                                      Jet3(posed.point_in_cam()[1], 1),
+                                      Jet3(posed.point_in_cam()[2], 2));
     Jet3 projected[2];
     ProjectionResidual<CameraModel, Jet3>(camera_.template As<Jet3>().data(), p, observed_,
                                           projected);
@@ -132,37 +233,11 @@ class ReprojectionErrorConstantCameraCost : public ceres::SizedCostFunction<2, 4
       residuals[r] = projected[r].a;
       d_projected.row(r) = projected[r].v.transpose();
     }
-    if (jacobians[0] != nullptr) {
-      // d p / d u = 2 (-w [X]x + (u.X) I - 2 X u^T + u X^T);  d p / d w = 2 (u x X).
-      Eigen::Matrix<double, 3, 4> d_rotation;
-      d_rotation.leftCols<3>() =
-          2.0 * (-w * CrossMatrix(point) + u.dot(point) * Eigen::Matrix3d::Identity() -
-                 2.0 * point * u.transpose() + u * point.transpose());
-      d_rotation.col(3) = 2.0 * a;
-      Eigen::Map<Eigen::Matrix<double, 2, 4, Eigen::RowMajor>> d_q(jacobians[0]);
-      d_q = d_projected * d_rotation;
-    }
-    if (jacobians[1] != nullptr) {
-      Eigen::Map<Eigen::Matrix<double, 2, 3, Eigen::RowMajor>> d_t(jacobians[1]);
-      d_t = d_projected;
-    }
-    if (jacobians[2] != nullptr) {
-      // d p / d X = I + 2 w [u]x + 2 [u]x [u]x (the rotation matrix when |q| = 1).
-      const Eigen::Matrix3d u_cross = CrossMatrix(u);
-      Eigen::Map<Eigen::Matrix<double, 2, 3, Eigen::RowMajor>> d_x(jacobians[2]);
-      d_x = d_projected *
-            (Eigen::Matrix3d::Identity() + 2.0 * w * u_cross + 2.0 * u_cross * u_cross);
-    }
+    posed.Chain(d_projected, jacobians);
     return true;
   }
 
  private:
-  static Eigen::Matrix3d CrossMatrix(const Eigen::Vector3d& v) {
-    Eigen::Matrix3d m;
-    m << 0.0, -v.z(), v.y(), v.z(), 0.0, -v.x(), -v.y(), v.x(), 0.0;
-    return m;
-  }
-
   CameraParamsData<CameraModel> camera_;
   Eigen::Vector2d observed_;
 };
@@ -237,6 +312,13 @@ inline ceres::CostFunction* CreateReprojectionErrorCost(CameraModelId model_id,
                                                         const Eigen::Vector2d& observed) {
   return VisitCameraModel(model_id, [&](auto model) -> ceres::CostFunction* {
     return ReprojectionErrorCost<decltype(model)>::Create(observed);
+  });
+}
+
+inline ceres::CostFunction* CreateReprojectionErrorAutoDiffCost(CameraModelId model_id,
+                                                                const Eigen::Vector2d& observed) {
+  return VisitCameraModel(model_id, [&](auto model) -> ceres::CostFunction* {
+    return ReprojectionErrorAutoDiff<decltype(model)>::Create(observed);
   });
 }
 
