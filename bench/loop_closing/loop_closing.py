@@ -6,7 +6,7 @@ maps a copy of it, so both see the same matches. Intrinsics may be made wrong on
 (--focal-factor 1.04: focal 4 % too long, held fixed), which makes drift. Prints registered
 frames, models, ATE (% of path), rotation error, loop gap (mean / max, ground-truth units),
 map time, the loops closed and their time, and writes a top view per set
-(OUT/<set>_top.png: ground truth, posegraph, none).
+(OUT/<set>_top.png: ground truth, posegraph with its loop links, none).
 
   bench/loop_closing/loop_closing.py --set NAME INPUT GROUNDTRUTH INTRINSICS \\
       [--set ...] [--focal-factor F] [--withhold] [--out DIR] [--loopsfm build/loopsfm]
@@ -121,7 +121,8 @@ def main():
                          map_s, len(loops), loop_s))
         subprocess.check_call([args.loopsfm, 'eval', os.path.join(outputs['posegraph'], 'sparse', '0'),
                                gt, '--plot', base + '_top.png', '--plot-also',
-                               os.path.join(outputs['none'], 'sparse', '0')],
+                               os.path.join(outputs['none'], 'sparse', '0'), '--plot-links',
+                               os.path.join(outputs['posegraph'], 'loop_links.txt')],
                               stdout=subprocess.DEVNULL)
     print(f'focal factor {args.focal_factor}, loop pairs {"withheld until the end" if args.withhold else "used while mapping"}')
     print('| set | loop closing | frames | models | ATE % path | rot. err deg | loop gap mean | '

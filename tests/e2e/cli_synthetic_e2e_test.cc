@@ -8,9 +8,11 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstring>
+#include <fstream>
 #include <iostream>
 #include <map>
 #include <memory>
@@ -217,6 +219,50 @@ TEST_F(CliSyntheticTest, EvalJsonAgreesWithTheLibrary) {
   expect_same("ate_fraction_of_path", metrics.ate_fraction_of_path);
   expect_same("rotation_error_mean_deg", metrics.rotation_error_mean_deg);
   expect_same("rotation_error_max_deg", metrics.rotation_error_max_deg);
+}
+
+// Loop closing is on by default, so the run lists the frames it tied together (none need
+// tying on this render: the file may hold only its header). `eval --plot-links` draws such
+// links between the model's frames, and refuses links that join none of them.
+TEST_F(CliSyntheticTest, LoopLinksAreWrittenAndPlotted) {
+  ASSERT_TRUE(fs::exists(run_->out / "loop_links.txt")) << run_->reconstruct;
+  EXPECT_NO_THROW(ReadLoopLinksFile(run_->out / "loop_links.txt"));
+
+  const Reconstruction model = ReadColmapModel(Model0());
+  std::vector<std::string> names;
+  for (const auto& [id, image] : model.Images()) {
+    if (image.registered) names.push_back(image.name);
+  }
+  std::sort(names.begin(), names.end());
+  ASSERT_GE(names.size(), 10u);
+  const fs::path links = run_->dir / "links.txt";
+  WriteLoopLinksFile(links, {{"split", names.front(), names[names.size() / 2], 40},
+                             {"posegraph", names[1], names.back(), 12}});
+  const std::string gt = (run_->scene / "groundtruth.txt").string();
+  const fs::path plain = run_->dir / "plain.png", linked = run_->dir / "linked.png";
+  const CommandResult without =
+      RunLoopsfm({"eval", Model0().string(), gt, "--plot", plain.string()});
+  ASSERT_EQ(without.exit_code, 0) << without;
+  const CommandResult with = RunLoopsfm(
+      {"eval", Model0().string(), gt, "--plot", linked.string(), "--plot-links", links.string()});
+  ASSERT_EQ(with.exit_code, 0) << with;
+  ASSERT_TRUE(fs::exists(linked));
+  auto bytes = [](const fs::path& file) {
+    std::ifstream in(file, std::ios::binary);
+    return std::string(std::istreambuf_iterator<char>(in), {});
+  };
+  EXPECT_NE(bytes(linked), bytes(plain)) << "the links changed nothing drawn";
+
+  const fs::path foreign = run_->dir / "foreign_links.txt";
+  WriteLoopLinksFile(foreign, {{"split", "not_a_frame.png", "nor_this.png", 5}});
+  const CommandResult refused = RunLoopsfm({"eval", Model0().string(), gt, "--plot",
+                                            linked.string(), "--plot-links", foreign.string()});
+  EXPECT_EQ(refused.exit_code, 2) << refused;
+  EXPECT_NE(refused.output.find("joins two frames"), std::string::npos) << refused;
+  const CommandResult no_plot =
+      RunLoopsfm({"eval", Model0().string(), gt, "--plot-links", links.string()});
+  EXPECT_EQ(no_plot.exit_code, 2) << no_plot;
+  EXPECT_NE(no_plot.output.find("--plot-links needs --plot"), std::string::npos) << no_plot;
 }
 
 TEST_F(CliSyntheticTest, DatabaseNamesVideoFramesByIndex) {

@@ -24,9 +24,11 @@ std::string ModelLabel(const std::string& model) {
 }
 
 // Ground truth and each scored model's aligned centres, in ground-truth order; the largest
-// loop gap of the first model drawn between its two frames.
+// loop gap of the first model drawn between its two frames, and the loop links (if any)
+// between the first model's frames, one colour per method.
 void WritePlot(const std::string& file, const std::vector<TrajectoryEntry>& ground_truth,
-               const std::vector<TrajectoryMetrics>& all, const std::vector<std::string>& names) {
+               const std::vector<TrajectoryMetrics>& all, const std::vector<std::string>& names,
+               const std::vector<LoopLink>& links, const std::string& links_file) {
   const std::array<std::array<unsigned char, 3>, 2> colours = {{{30, 90, 220}, {220, 60, 40}}};
   std::vector<TopViewPath> paths = {{"ground truth", {}, {150, 150, 150}}};
   for (const TrajectoryEntry& e : ground_truth) paths[0].centres.push_back(e.world_from_cam.translation);
@@ -57,6 +59,33 @@ void WritePlot(const std::string& file, const std::vector<TrajectoryEntry>& grou
                             {0, 160, 0}});
       }
     }
+    if (m == 0 && !links.empty()) {
+      std::map<std::string, Eigen::Vector3d> by_estimated_name;
+      for (const FrameError& f : metrics.frames) by_estimated_name[f.estimated_name] = f.aligned_centre;
+      std::map<std::string, TopViewSegments> by_method;
+      int missing = 0;
+      for (const LoopLink& link : links) {
+        const auto old_it = by_estimated_name.find(link.old_frame);
+        const auto recent_it = by_estimated_name.find(link.recent_frame);
+        if (old_it == by_estimated_name.end() || recent_it == by_estimated_name.end()) {
+          ++missing;
+          continue;
+        }
+        by_method[link.method].segments.push_back({old_it->second, recent_it->second});
+      }
+      if (missing == static_cast<int>(links.size())) {
+        throw InvalidArgument(fmt::format(
+            "none of the {} links of '{}' joins two frames of '{}': pass the loop_links.txt of "
+            "the run that wrote this model",
+            links.size(), links_file, names[m]));
+      }
+      for (auto& [method, s] : by_method) {
+        s.label = fmt::format("loop links ({}): {}", method, s.segments.size());
+        s.rgb = method == "split" ? std::array<unsigned char, 3>{230, 140, 0}
+                                  : std::array<unsigned char, 3>{150, 0, 200};
+        segments.push_back(std::move(s));
+      }
+    }
   }
   WriteTopView(file, paths, segments, "top view, aligned to the ground truth");
 }
@@ -67,7 +96,7 @@ void AddEvalCommand(CLI::App& app) {
   struct Flags {
     std::string model, groundtruth;
     bool json = false;
-    std::string plot, plot_also;
+    std::string plot, plot_also, plot_links;
   };
   auto flags = std::make_shared<Flags>();
   CLI::App* cmd = app.add_subcommand(
@@ -85,11 +114,20 @@ void AddEvalCommand(CLI::App& app) {
   cmd->add_option("--plot-also", flags->plot_also,
                   "With --plot: a second model or trajectory drawn in the same view (e.g. the "
                   "same run with --loop-closing none)");
+  cmd->add_option("--plot-links", flags->plot_links,
+                  "With --plot: draw the frames that loop closing tied together (OUT/"
+                  "loop_links.txt of the run that wrote the model) as lines between them")
+      ->check(CLI::ExistingFile);
   cmd->callback([flags] {
     const auto ground_truth = ReadTrajectoryFile(flags->groundtruth);
     if (!flags->plot_also.empty() && flags->plot.empty()) {
       throw InvalidArgument("--plot-also needs --plot FILE.png (the view to draw it in)");
     }
+    if (!flags->plot_links.empty() && flags->plot.empty()) {
+      throw InvalidArgument("--plot-links needs --plot FILE.png (the view to draw them in)");
+    }
+    const std::vector<LoopLink> links =
+        flags->plot_links.empty() ? std::vector<LoopLink>() : ReadLoopLinksFile(flags->plot_links);
     auto evaluate = [&](const std::string& model) {
       return std::filesystem::is_directory(model)
                  ? EvaluateTrajectory(ReadColmapModel(model), ground_truth)
@@ -103,7 +141,7 @@ void AddEvalCommand(CLI::App& app) {
         plotted.push_back(evaluate(flags->plot_also));
         names.push_back(flags->plot_also);
       }
-      WritePlot(flags->plot, ground_truth, plotted, names);
+      WritePlot(flags->plot, ground_truth, plotted, names, links, flags->plot_links);
     }
     if (flags->json) {
       std::puts(ToJson(metrics, false).dump(2).c_str());

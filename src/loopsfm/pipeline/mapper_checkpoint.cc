@@ -15,7 +15,7 @@ namespace fs = std::filesystem;
 namespace {
 
 constexpr char kMagic[] = "loopsfm mapper checkpoint\n";
-constexpr uint32_t kVersion = 2;
+constexpr uint32_t kVersion = 3;
 
 // FNV-1a over the bytes of what mapping reads.
 class Digest {
@@ -283,6 +283,10 @@ nlohmann::json ReportJson(const MapperReport& r) {
   for (const TrajectoryEntry& e : r.path_before_loop_closing) {
     path.push_back({e.name, PoseJson(e.world_from_cam)});
   }
+  nlohmann::json links = nlohmann::json::array();
+  for (const LoopLink& l : r.loop_links) {
+    links.push_back({l.method, l.old_frame, l.recent_frame, l.num_point_pairs});
+  }
   nlohmann::json registrations = nlohmann::json::array();
   for (const RegistrationRounds& g : r.registrations) {
     registrations.push_back({g.frame, g.num_correspondences, g.num_inliers,
@@ -303,6 +307,7 @@ nlohmann::json ReportJson(const MapperReport& r) {
                    r.seconds_loop_closing, r.seconds_split}},
       {"loops_closed", loops},
       {"path_before_loop_closing", path},
+      {"loop_links", links},
       {"registrations", registrations},
   };
 }
@@ -343,6 +348,10 @@ MapperReport ReportFromJson(const nlohmann::json& j) {
   }
   for (const nlohmann::json& e : j.at("path_before_loop_closing")) {
     r.path_before_loop_closing.push_back({e.at(0).get<std::string>(), PoseFromJson(e.at(1))});
+  }
+  for (const nlohmann::json& l : j.at("loop_links")) {
+    r.loop_links.push_back({l.at(0).get<std::string>(), l.at(1).get<std::string>(),
+                            l.at(2).get<std::string>(), GetInt<int>(l.at(3))});
   }
   for (const nlohmann::json& g : j.at("registrations")) {
     r.registrations.push_back({g.at(0).get<std::string>(), GetInt<int>(g.at(1)),

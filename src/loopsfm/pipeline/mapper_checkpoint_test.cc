@@ -69,6 +69,17 @@ TEST_F(MapperCheckpointFileTest, ResumingFromTheFileGivesTheUninterruptedResult)
   EXPECT_EQ(read->report.num_local_ba, saved.report.num_local_ba);
   EXPECT_EQ(read->report.seconds_local_ba, saved.report.seconds_local_ba);
 
+  // Loop links made before the checkpoint are part of its report.
+  MapperCheckpoint with_links = saved;
+  with_links.report.loop_links = {{"posegraph", "a.png", "b.png", 12}};
+  const fs::path links_path = dir_ / "mapper_checkpoint_links.bin";
+  WriteMapperCheckpoint(links_path, with_links, fingerprint);
+  const std::optional<MapperCheckpoint> read_links = ReadMapperCheckpoint(links_path, fingerprint);
+  ASSERT_TRUE(read_links.has_value());
+  ASSERT_EQ(read_links->report.loop_links.size(), 1u);
+  EXPECT_EQ(read_links->report.loop_links[0].recent_frame, "b.png");
+  EXPECT_EQ(read_links->report.loop_links[0].num_point_pairs, 12);
+
   MapperCheckpointing resuming;
   resuming.resume = &*read;
   MapperReport report;

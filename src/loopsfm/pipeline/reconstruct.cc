@@ -168,9 +168,20 @@ ReconstructReport Reconstruct(const fs::path& input, const fs::path& output_dir,
   report.stage_times.push_back({"export", stage.ElapsedSeconds()});
   report.total_seconds = total.ElapsedSeconds();
   report.peak_memory_bytes = PeakResidentBytes();
+  // The frames loop closing tied together, for plots (`loopsfm eval --plot-links`); none
+  // from an earlier run is left behind when this one does not close loops.
+  const fs::path links_path = output_dir / "loop_links.txt";
+  if (options.mapper.loop_closure.method != LoopClosingMethod::kNone) {
+    WriteLoopLinksFile(links_path, report.mapper.loop_links);
+    report.output.written.push_back(links_path);
+  } else {
+    fs::remove(links_path);
+  }
   if (options.mapper.record_alternate_poses) {
     WriteRegistrationRounds(output_dir / "registrations.csv", report.mapper.registrations);
     report.output.written.push_back(output_dir / "registrations.csv");
+  } else {
+    fs::remove(output_dir / "registrations.csv");
   }
   if (options.output.formats.count(ExportFormat::kReport)) {
     stage.Restart();

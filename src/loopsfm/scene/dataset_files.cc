@@ -135,4 +135,35 @@ void WriteTrajectoryFile(const std::filesystem::path& path,
   }
 }
 
+std::vector<LoopLink> ReadLoopLinksFile(const std::filesystem::path& path) {
+  std::ifstream in = OpenForReading(path, "loop links");
+  std::vector<LoopLink> links;
+  ForEachDataLine(in, [&](int number, const std::string& line) {
+    std::istringstream fields(line);
+    LoopLink link;
+    std::string rest;
+    if (!(fields >> link.method >> link.old_frame >> link.recent_frame >> link.num_point_pairs) ||
+        (fields >> rest) || link.num_point_pairs < 0 ||
+        (link.method != "posegraph" && link.method != "split")) {
+      throw InputError(fmt::format(
+          "{}:{}: expected 'method old_frame recent_frame point_pairs' (method posegraph or "
+          "split, point_pairs a count), got '{}'", path.string(),
+          number, line));
+    }
+    links.push_back(std::move(link));
+  });
+  return links;
+}
+
+void WriteLoopLinksFile(const std::filesystem::path& path, const std::vector<LoopLink>& links) {
+  std::ofstream out(path);
+  out << "# method old_frame recent_frame point_pairs   (frames far apart in time that loop "
+         "closing tied together)\n";
+  for (const LoopLink& link : links) {
+    out << link.method << ' ' << link.old_frame << ' ' << link.recent_frame << ' '
+        << link.num_point_pairs << '\n';
+  }
+  if (!out) throw StorageError(fmt::format("cannot write '{}'", path.string()));
+}
+
 }  // namespace loopsfm

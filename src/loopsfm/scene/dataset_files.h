@@ -6,6 +6,8 @@
 //                    k1 k2 p1 p2", "OPENCV_FISHEYE w h fx fy cx cy k1 k2 k3 k4" (every model
 //                    of sensor/camera_models.h); '#' starts a comment
 //   trajectory       "name tx ty tz qx qy qz qw" per line, camera-to-world (world_from_cam)
+//   loop links       "method old_frame recent_frame point_pairs" per line: two frames far apart
+//                    in time that loop closing tied together (OUT/loop_links.txt)
 
 #include <filesystem>
 #include <string>
@@ -32,5 +34,16 @@ struct TrajectoryEntry {
 std::vector<TrajectoryEntry> ReadTrajectoryFile(const std::filesystem::path& path);
 void WriteTrajectoryFile(const std::filesystem::path& path,
                          const std::vector<TrajectoryEntry>& entries);
+
+// Two frames far apart in time that loop closing tied together, and the point pairs behind
+// the link; method: "posegraph" or "split" (the --loop-closing method that made it).
+struct LoopLink {
+  std::string method;
+  std::string old_frame, recent_frame;
+  int num_point_pairs = 0;
+};
+
+std::vector<LoopLink> ReadLoopLinksFile(const std::filesystem::path& path);
+void WriteLoopLinksFile(const std::filesystem::path& path, const std::vector<LoopLink>& links);
 
 }  // namespace loopsfm

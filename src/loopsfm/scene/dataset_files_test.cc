@@ -131,5 +131,35 @@ TEST(DatasetFiles, TrajectoryRoundTrips) {
             1e-8);
 }
 
+TEST(DatasetFiles, LoopLinksRoundTripAndBadLinesAreNamed) {
+  const std::vector<LoopLink> links = {{"posegraph", "frame_000012.png", "frame_000251.png", 407},
+                                       {"split", "frame_000030.png", "frame_000270.png", 3}};
+  const auto path = std::filesystem::temp_directory_path() / "loopsfm_scene_test_links.txt";
+  WriteLoopLinksFile(path, links);
+  const std::vector<LoopLink> read = ReadLoopLinksFile(path);
+  ASSERT_EQ(read.size(), 2u);
+  for (size_t k = 0; k < 2; ++k) {
+    EXPECT_EQ(read[k].method, links[k].method);
+    EXPECT_EQ(read[k].old_frame, links[k].old_frame);
+    EXPECT_EQ(read[k].recent_frame, links[k].recent_frame);
+    EXPECT_EQ(read[k].num_point_pairs, links[k].num_point_pairs);
+  }
+  WriteLoopLinksFile(path, {});
+  EXPECT_TRUE(ReadLoopLinksFile(path).empty());
+
+  for (const std::string bad : {"posegraph a.png b.png", "posegraph a.png b.png 3 extra",
+                                "bundle a.png b.png 3", "split a.png b.png -1"}) {
+    try {
+      ReadLoopLinksFile(TempFile("bad_links.txt", "# header\n" + bad + "\n"));
+      ADD_FAILURE() << "accepted '" << bad << "'";
+    } catch (const InputError& e) {
+      const std::string message = e.what();
+      EXPECT_NE(message.find("bad_links.txt:2"), std::string::npos) << message;
+      EXPECT_NE(message.find("method old_frame recent_frame point_pairs"), std::string::npos)
+          << message;
+    }
+  }
+}
+
 }  // namespace
 }  // namespace loopsfm

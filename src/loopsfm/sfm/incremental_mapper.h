@@ -240,6 +240,9 @@ struct MapperReport {
   int num_split_groups_refused = 0;
   int num_split_pairs = 0;
   double seconds_split = 0.0;
+  // The frames each loop correction tied together (pose graph: each loop edge; split
+  // tracks: the median observers in capture order of each tied pair's old and recent point).
+  std::vector<LoopLink> loop_links;
   // With record_alternate_poses: each successful registration, in the order they happened
   // (a frame registered again after a failed bundle appears again).
   std::vector<RegistrationRounds> registrations;

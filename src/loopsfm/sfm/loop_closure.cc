@@ -280,6 +280,7 @@ bool LoopCloser::DetectAndClose(MapperState& model, image_t image_id, MapperRepo
   // Loop edges, one per registration of the window: between the old frame that sees most
   // of its inlier old points and the recent frame that sees most of their recent partners.
   std::vector<std::pair<image_t, image_t>> loop_edges;
+  std::vector<int> edge_pairs;  // inlier point pairs behind each edge
   auto most_votes = [&](const std::map<image_t, int>& votes) {
     return std::max_element(votes.begin(), votes.end(), [](const auto& a, const auto& b) {
              return a.second < b.second;
@@ -300,9 +301,13 @@ bool LoopCloser::DetectAndClose(MapperState& model, image_t image_id, MapperRepo
     }
     if (old_votes.empty() || recent_votes.empty()) continue;
     const image_t old_frame = most_votes(old_votes), recent_frame = most_votes(recent_votes);
-    if (std::find(loop_edges.begin(), loop_edges.end(), std::make_pair(old_frame, recent_frame)) ==
-        loop_edges.end()) {
+    const auto edge = std::find(loop_edges.begin(), loop_edges.end(),
+                                std::make_pair(old_frame, recent_frame));
+    if (edge == loop_edges.end()) {
       loop_edges.push_back({old_frame, recent_frame});
+      edge_pairs.push_back(frame_inliers[f]);
+    } else {
+      edge_pairs[edge - loop_edges.begin()] += frame_inliers[f];
     }
   }
 
@@ -329,6 +334,10 @@ bool LoopCloser::DetectAndClose(MapperState& model, image_t image_id, MapperRepo
                loop.correction_rotation_deg, loop.correction_scale, loop.num_points_before,
                loop.num_points_after, loop.seconds);
   report->loops_closed.push_back(std::move(loop));
+  for (size_t e = 0; e < loop_edges.size(); ++e) {
+    report->loop_links.push_back({"posegraph", rec.GetImage(loop_edges[e].first).name,
+                                  rec.GetImage(loop_edges[e].second).name, edge_pairs[e]});
+  }
   window_.clear();
   // While mapping, each closing ends with a global refinement: wait for more of the loop.
   // After mapping, closing is cheap and each window of the overlap corrects what is left.

@@ -51,6 +51,9 @@ TEST(LoopCloser, DriftedWalkBackIsClosedAndItsEndsFused) {
       << "before " << before.max_centre_error << ", after " << after.max_centre_error;
   // The two ends' points of one track were fused.
   EXPECT_LT(state.reconstruction().NumPoints3D(), 0.9 * points_before);
+  // One link per loop edge, from the walk out to the walk back, carrying the inlier pairs.
+  testing::ExpectLinksAcrossTheLoop(p, report, "posegraph", options.loop_closure.min_frame_gap,
+                                    loop.num_inliers);
 }
 
 TEST(LoopCloser, ConsistentMapHasNoLoopToClose) {

@@ -3,6 +3,10 @@
 // track_split_test.cc): the frames of the walk back registered where drift put them.
 
 #include <algorithm>
+#include <map>
+#include <string>
+
+#include <gtest/gtest.h>
 
 #include "loopsfm/sfm/mapper_state.h"
 #include "loopsfm/sfm/sfm_test_problem.h"
@@ -35,6 +39,24 @@ inline void RegisterWithDrift(const MapperProblem& p, MapperState& state, double
     state.TriangulateImage(id);
   }
   state.SetGauge(p.input.frames[0].image_id, p.input.frames[1].image_id);
+}
+
+// The report's loop links are all of `method`, each from a frame of the walk out to one at
+// least min_frame_gap later, and carry `num_point_pairs` pairs in all.
+inline void ExpectLinksAcrossTheLoop(const MapperProblem& p, const MapperReport& report,
+                                     const std::string& method, int min_frame_gap,
+                                     int num_point_pairs) {
+  ASSERT_FALSE(report.loop_links.empty());
+  std::map<std::string, int> index;
+  for (size_t i = 0; i < p.input.frames.size(); ++i) index[p.input.frames[i].name] = static_cast<int>(i);
+  int pairs = 0;
+  for (const LoopLink& link : report.loop_links) {
+    EXPECT_EQ(link.method, method);
+    EXPECT_LE(index.at(link.old_frame) + min_frame_gap, index.at(link.recent_frame))
+        << link.old_frame << " -> " << link.recent_frame;
+    pairs += link.num_point_pairs;
+  }
+  EXPECT_EQ(pairs, num_point_pairs);
 }
 
 }  // namespace loopsfm::testing

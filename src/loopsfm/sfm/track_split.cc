@@ -132,6 +132,12 @@ int CloseLoopsBySplitTracks(MapperState& model, const LoopClosureOptions& option
     return 0;
   }
 
+  std::map<std::pair<int, int>, int> links;  // (old, recent median observer) -> pairs
+  for (const SplitPair& pair : tied) ++links[{pair.old_span.median, pair.recent_span.median}];
+  for (const auto& [frames, num_pairs] : links) {
+    report->loop_links.push_back({"split", input.frames[frames.first].name,
+                                  input.frames[frames.second].name, num_pairs});
+  }
   KeepPathBeforeLoopClosing(input, rec, report);
   const size_t points_before = rec.NumPoints3D();
   model.GlobalBundle(report, [&](BundleAdjuster& adjuster) {

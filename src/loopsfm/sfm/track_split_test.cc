@@ -40,6 +40,10 @@ TEST(TrackSplit, DriftedWalkBackIsPulledOntoTheFirstFrames) {
       << "before " << before.max_centre_error << ", after " << after.max_centre_error;
   // Tied pairs agree afterwards and were merged by re-triangulation.
   EXPECT_LT(state.reconstruction().NumPoints3D(), 0.9 * points_before);
+  // Links for plots: the median observers of each tied pair's two points, the old one on the
+  // walk out, the recent one at least min_frame_gap later, all pairs accounted for.
+  testing::ExpectLinksAcrossTheLoop(p, report, "split", options.loop_closure.min_frame_gap,
+                                    tied);
 }
 
 TEST(TrackSplit, ConsistentMapHasNothingToTie) {
@@ -52,6 +56,7 @@ TEST(TrackSplit, ConsistentMapHasNothingToTie) {
   EXPECT_EQ(CloseLoopsBySplitTracks(state, options.loop_closure, random, &report), 0);
   EXPECT_EQ(report.num_split_groups, 0);
   EXPECT_TRUE(report.path_before_loop_closing.empty());
+  EXPECT_TRUE(report.loop_links.empty());
 }
 
 TEST(TrackSplit, CorrectionTooLargeForDriftIsRefused) {
