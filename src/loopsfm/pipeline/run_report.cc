@@ -31,13 +31,18 @@ std::vector<Eigen::Vector3d> AlignedCentres(const TrajectoryMetrics& metrics) {
 
 nlohmann::json TopView(const std::vector<TrajectoryEntry>& path,
                        const std::vector<TrajectoryEntry>& before,
+                       const std::vector<LoopLink>& links,
                        const std::optional<std::vector<TrajectoryEntry>>& groundtruth,
                        nlohmann::json* evaluation) {
   std::vector<std::pair<std::string, std::vector<Eigen::Vector3d>>> paths;
+  std::map<std::string, Eigen::Vector3d> drawn;  // frame name -> centre as drawn
   if (groundtruth) {
     const TrajectoryMetrics metrics = EvaluateTrajectory(path, *groundtruth);
     paths.push_back({"ground truth", Centres(*groundtruth)});
     paths.push_back({"loopsfm", AlignedCentres(metrics)});
+    if (metrics.aligned) {
+      for (const FrameError& f : metrics.frames) drawn[f.estimated_name] = f.aligned_centre;
+    }
     if (!before.empty()) {
       paths.push_back({"before loop closing", AlignedCentres(EvaluateTrajectory(before, *groundtruth))});
     }
@@ -55,6 +60,7 @@ nlohmann::json TopView(const std::vector<TrajectoryEntry>& path,
   } else {
     paths.push_back({"loopsfm", Centres(path)});
     if (!before.empty()) paths.push_back({"before loop closing", Centres(before)});
+    for (const TrajectoryEntry& e : path) drawn[e.name] = e.world_from_cam.translation;
   }
   if (paths[0].second.empty()) return nullptr;
   const TopViewPlane plane = FitTopViewPlane(paths[0].second);
@@ -64,6 +70,7 @@ nlohmann::json TopView(const std::vector<TrajectoryEntry>& path,
   for (const auto& [label, centres] : paths) {
     if (!centres.empty()) view["paths"].push_back(ReportTopViewPath(label, centres, plane));
   }
+  view["links"] = ReportTopViewLinks(links, drawn, plane);
   return view;
 }
 
@@ -133,7 +140,8 @@ nlohmann::json RunReportData(const ReconstructReport& report,
   data["points"] = ReportPoints(models[0]);
   nlohmann::json evaluation;
   data["top_view"] = TopView(TrajectoryFromReconstruction(models[0]),
-                             report.mapper.path_before_loop_closing, groundtruth, &evaluation);
+                             report.mapper.path_before_loop_closing, report.mapper.loop_links,
+                             groundtruth, &evaluation);
   if (!evaluation.is_null()) data["evaluation"] = evaluation;
   return data;
 }

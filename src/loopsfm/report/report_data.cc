@@ -75,6 +75,29 @@ nlohmann::json ReportTopViewPath(const std::string& label, const std::vector<Eig
   return {{"label", label}, {"xy", xy}};
 }
 
+nlohmann::json ReportTopViewLinks(const std::vector<LoopLink>& links,
+                                  const std::map<std::string, Eigen::Vector3d>& centres,
+                                  const TopViewPlane& plane) {
+  nlohmann::json groups = nlohmann::json::array();
+  std::map<std::string, size_t> group_of;
+  for (const LoopLink& link : links) {
+    const auto old_it = centres.find(link.old_frame);
+    const auto recent_it = centres.find(link.recent_frame);
+    if (old_it == centres.end() || recent_it == centres.end()) continue;
+    const auto [it, added] = group_of.emplace(link.method, groups.size());
+    if (added) {
+      groups.push_back({{"method", link.method}, {"segments", nlohmann::json::array()}});
+    }
+    const Eigen::Vector2d a = plane.Project(old_it->second), b = plane.Project(recent_it->second);
+    groups[it->second]["segments"].push_back({a.x(), a.y(), b.x(), b.y()});
+  }
+  for (nlohmann::json& group : groups) {
+    group["label"] = fmt::format("loop links ({}): {}", group["method"].get<std::string>(),
+                                 group["segments"].size());
+  }
+  return groups;
+}
+
 nlohmann::json ReportImage(const std::string& title, const std::filesystem::path& png) {
   std::ifstream in(png, std::ios::binary);
   const std::string bytes = in ? std::string(std::istreambuf_iterator<char>(in), {}) : std::string();

@@ -9,6 +9,7 @@
 //   data["matrices"].push_back(ReportImage("Verified matches", out / "database_matches.png"));
 
 #include <filesystem>
+#include <map>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -17,6 +18,7 @@
 #include <nlohmann/json.hpp>
 
 #include "loopsfm/report/top_view.h"
+#include "loopsfm/scene/dataset_files.h"
 #include "loopsfm/scene/frame.h"
 #include "loopsfm/scene/reconstruction.h"
 
@@ -37,6 +39,14 @@ nlohmann::json ReportPoints(const Reconstruction& model, size_t max_points = 200
 // {label, xy} of a path seen from above: its centres projected onto `plane`.
 nlohmann::json ReportTopViewPath(const std::string& label, const std::vector<Eigen::Vector3d>& centres,
                                  const TopViewPlane& plane);
+
+// Loop links (OUT/loop_links.txt) as segments of the top view, one entry per method, in the
+// order the methods first appear: {"label": "loop links (METHOD): N", "method": METHOD,
+// "segments": [[x1, y1, x2, y2], ...]}. `centres` maps frame names to the centres the view
+// draws; a link with a frame not among them is left out.
+nlohmann::json ReportTopViewLinks(const std::vector<LoopLink>& links,
+                                  const std::map<std::string, Eigen::Vector3d>& centres,
+                                  const TopViewPlane& plane);
 
 // {title, png_base64} of an image file (a matrix plot). Throws InputError naming the file
 // when it cannot be read.

@@ -1,6 +1,8 @@
 #include "loopsfm/report/report_data.h"
 
 #include <gtest/gtest.h>
+
+#include <map>
 #include <unistd.h>
 
 #include <cmath>
@@ -102,6 +104,34 @@ TEST(ReportDataTest, TopViewPathInThePlaneOfTheCentres) {
     EXPECT_NEAR(std::abs(path["xy"][i][0].get<double>()), std::abs(4 * std::cos(a)), 1e-9);
     EXPECT_NEAR(std::abs(path["xy"][i][1].get<double>()), std::abs(std::sqrt(2.0) * std::sin(a)), 1e-9);
   }
+}
+
+TEST(ReportDataTest, TopViewLinksJoinTheDrawnCentresPerMethod) {
+  std::map<std::string, Eigen::Vector3d> centres = {{"a.png", {0, 0, 0}},
+                                                    {"b.png", {10, 0, 0}},
+                                                    {"c.png", {10, 4, 0}},
+                                                    {"d.png", {0, 4, 0}}};
+  std::vector<Eigen::Vector3d> all;
+  for (const auto& [name, c] : centres) all.push_back(c);
+  const TopViewPlane plane = FitTopViewPlane(all);
+  const nlohmann::json links = ReportTopViewLinks({{"posegraph", "a.png", "c.png", 40},
+                                                   {"split", "b.png", "d.png", 3},
+                                                   {"posegraph", "a.png", "d.png", 9},
+                                                   {"split", "a.png", "not_drawn.png", 5}},
+                                                  centres, plane);
+  ASSERT_EQ(links.size(), 2u);
+  EXPECT_EQ(links[0]["method"], "posegraph");
+  EXPECT_EQ(links[0]["label"], "loop links (posegraph): 2");
+  EXPECT_EQ(links[1]["label"], "loop links (split): 1");
+  // Each segment joins the two frames' projections; lengths are those of the 3D centres.
+  const nlohmann::json& ac = links[0]["segments"][0];
+  const Eigen::Vector2d a = plane.Project(centres["a.png"]);
+  EXPECT_NEAR(ac[0].get<double>(), a.x(), 1e-12);
+  EXPECT_NEAR(ac[1].get<double>(), a.y(), 1e-12);
+  EXPECT_NEAR(std::hypot(ac[2].get<double>() - ac[0].get<double>(),
+                         ac[3].get<double>() - ac[1].get<double>()),
+              std::hypot(10.0, 4.0), 1e-9);
+  EXPECT_TRUE(ReportTopViewLinks({}, centres, plane).empty());
 }
 
 TEST(ReportDataTest, Base64OfRfc4648Vectors) {

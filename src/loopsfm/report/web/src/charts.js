@@ -71,7 +71,8 @@ function equalScaleBounds(paths, width, height) {
   };
 }
 
-// Lines of the given 2D paths, one colour each (grey for the ground truth), one scale.
+// Lines of the given 2D paths, one colour each (grey for the ground truth), one scale, and the
+// loop links (topView.links) as thin lines under them.
 export function topViewChart(parent, topView) {
   const paths = topView.paths.filter((p) => Array.isArray(p.xy) && p.xy.length > 0);
   const canvas = chartBox(parent, 'chart-top-view');
@@ -92,6 +93,25 @@ export function topViewChart(parent, topView) {
       pointHitRadius: 4,
     };
   });
+  // Loop links: thin lines between the two frames each loop correction tied together, under
+  // the paths; a point without coordinates ends one segment before the next.
+  const kLinkColours = { split: 'rgb(230, 140, 0)', posegraph: 'rgb(150, 0, 200)' };
+  for (const group of topView.links || []) {
+    const data = group.segments.flatMap(([x1, y1, x2, y2]) => [{ x: x1, y: y1 }, { x: x2, y: y2 }, { x: null, y: null }]);
+    const c = kLinkColours[group.method] || 'rgb(120, 120, 120)';
+    datasets.push({
+      label: group.label,
+      data,
+      order: paths.length + 1,
+      showLine: true,
+      spanGaps: false,
+      borderColor: c,
+      backgroundColor: c,
+      borderWidth: 0.75,
+      pointRadius: 0,
+      pointHitRadius: 0,
+    });
+  }
   const axis = (text) => ({
     type: 'linear', title: { display: Boolean(text), text: text || '' }, ticks: { includeBounds: false },
   });
