@@ -168,7 +168,12 @@ export function scene3d(parent, data) {
   const selected = new Mesh(new BufferGeometry(),
     new MeshBasicMaterial({ color: kSelectedColour, transparent: true, opacity: 0.6, side: DoubleSide, depthWrite: false }));
   const selectedEdges = new LineSegments(new BufferGeometry(), new LineBasicMaterial({ color: kSelectedColour }));
-  scene.add(selected, selectedEdges);
+  // A marker of fixed size on screen at the selected camera's centre: a frustum alone can be a
+  // few pixels on a long path.
+  const selectedMarker = new Points(new BufferGeometry(),
+    new PointsMaterial({ color: kSelectedColour, size: 12, sizeAttenuation: false, depthTest: false }));
+  selectedMarker.renderOrder = 1;
+  scene.add(selected, selectedEdges, selectedMarker);
 
   // Looking down the cameras' mean up direction, from above and to the side.
   const up = new Vector3();
@@ -216,6 +221,8 @@ export function scene3d(parent, data) {
     selected.geometry = lineGeometry(frustumFaces(f));
     selectedEdges.geometry.dispose();
     selectedEdges.geometry = lineGeometry(frustumEdges(f));
+    selectedMarker.geometry.dispose();
+    selectedMarker.geometry = lineGeometry([centres[k].x, centres[k].y, centres[k].z]);
     label.textContent = describe(frames[k]);
     render();
   };
