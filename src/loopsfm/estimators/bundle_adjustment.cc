@@ -140,6 +140,7 @@ BundleAdjustmentOptions BundleAdjustmentOptions::Local() {
 BundleAdjustmentOptions BundleAdjustmentOptions::Global() {
   BundleAdjustmentOptions options;
   options.max_num_iterations = 100;
+  options.settle_tolerance = 1e-5;
   return options;
 }
 
@@ -156,6 +157,9 @@ void BundleAdjustmentOptions::Check() const {
   LOOPSFM_REQUIRE_OPTION(
       function_tolerance >= 0.0 && gradient_tolerance >= 0.0 && parameter_tolerance >= 0.0,
       "bundle adjustment: tolerances must be >= 0");
+  LOOPSFM_REQUIRE_OPTION(settle_tolerance >= 0.0,
+                         "bundle adjustment: settle_tolerance must be >= 0 (got {})",
+                         settle_tolerance);
   LOOPSFM_REQUIRE_OPTION(max_linear_solver_iterations >= 1,
                          "bundle adjustment: max_linear_solver_iterations must be >= 1 (got {})",
                          max_linear_solver_iterations);
@@ -501,6 +505,81 @@ void BundleAdjuster::ConfigureSolver(ceres::Solver::Options* solver_options) {
       options_.print_progress ? ceres::PER_MINIMIZER_ITERATION : ceres::SILENT;
 }
 
+namespace {
+
+// Ends the solve once the variable poses and camera parameters have settled
+// (BundleAdjustmentOptions::settle_tolerance). Needs update_state_every_iteration: it reads
+// them from the reconstruction after each step.
+class SettledCallback : public ceres::IterationCallback {
+ public:
+  SettledCallback(const Reconstruction& reconstruction, std::vector<image_t> image_ids,
+                  std::vector<camera_t> camera_ids, double tolerance)
+      : reconstruction_(reconstruction),
+        image_ids_(std::move(image_ids)),
+        camera_ids_(std::move(camera_ids)),
+        tolerance_(tolerance) {
+    Snapshot();
+    Eigen::Vector3d mean = Eigen::Vector3d::Zero();
+    for (const Eigen::Vector3d& c : centres_) mean += c;
+    mean /= static_cast<double>(centres_.size());
+    double sum = 0.0;
+    for (const Eigen::Vector3d& c : centres_) sum += (c - mean).squaredNorm();
+    spread_ = std::sqrt(sum / static_cast<double>(centres_.size()));
+  }
+
+  ceres::CallbackReturnType operator()(const ceres::IterationSummary& summary) override {
+    if (summary.iteration == 0 || !summary.step_is_successful || spread_ <= 0.0) {
+      return ceres::SOLVER_CONTINUE;
+    }
+    const std::vector<Eigen::Vector3d> centres = centres_;
+    const std::vector<Eigen::Quaterniond> rotations = rotations_;
+    const std::vector<double> params = params_;
+    Snapshot();
+    double max_move = 0.0, max_turn = 0.0, max_change = 0.0;
+    for (size_t i = 0; i < centres_.size(); ++i) {
+      max_move = std::max(max_move, (centres_[i] - centres[i]).norm());
+      max_turn = std::max(max_turn, rotations_[i].angularDistance(rotations[i]));
+    }
+    for (size_t i = 0; i < params_.size(); ++i) {
+      max_change = std::max(max_change, std::abs(params_[i] - params[i]) /
+                                            std::max(std::abs(params[i]), 1.0));
+    }
+    const bool settled = max_move <= tolerance_ * spread_ && max_turn <= tolerance_ &&
+                         max_change <= tolerance_;
+    num_settled_ = settled ? num_settled_ + 1 : 0;
+    return num_settled_ >= 2 ? ceres::SOLVER_TERMINATE_SUCCESSFULLY : ceres::SOLVER_CONTINUE;
+  }
+
+ private:
+  void Snapshot() {
+    centres_.clear();
+    rotations_.clear();
+    params_.clear();
+    for (const image_t id : image_ids_) {
+      const Rigid3d& pose = reconstruction_.GetImage(id).cam_from_world;
+      const Eigen::Quaterniond rotation = pose.rotation.normalized();
+      rotations_.push_back(rotation);
+      centres_.push_back(-(rotation.inverse() * pose.translation));
+    }
+    for (const camera_t id : camera_ids_) {
+      const std::vector<double>& values = reconstruction_.GetCamera(id).params;
+      params_.insert(params_.end(), values.begin(), values.end());
+    }
+  }
+
+  const Reconstruction& reconstruction_;
+  const std::vector<image_t> image_ids_;
+  const std::vector<camera_t> camera_ids_;
+  const double tolerance_;
+  double spread_ = 0.0;
+  int num_settled_ = 0;
+  std::vector<Eigen::Vector3d> centres_;
+  std::vector<Eigen::Quaterniond> rotations_;
+  std::vector<double> params_;
+};
+
+}  // namespace
+
 bool BundleAdjuster::Solve(Reconstruction* reconstruction) {
   if (problem_ == nullptr) SetUp(reconstruction);
   LOOPSFM_CHECK_MSG(reconstruction == reconstruction_,
@@ -515,6 +594,28 @@ bool BundleAdjuster::Solve(Reconstruction* reconstruction) {
 
   ceres::Solver::Options solver_options;
   ConfigureSolver(&solver_options);
+  std::unique_ptr<SettledCallback> settled;
+  if (options_.settle_tolerance > 0.0) {
+    std::vector<image_t> variable_images;
+    for (const image_t id : Sorted(pose_blocks_)) {
+      const double* rotation = reconstruction_->GetImage(id).cam_from_world.rotation.coeffs().data();
+      if (!problem_->IsParameterBlockConstant(rotation)) variable_images.push_back(id);
+    }
+    std::vector<camera_t> variable_cameras;
+    for (const camera_t id : Sorted(cameras_added_)) {
+      const double* params = reconstruction_->GetCamera(id).params.data();
+      if (problem_->HasParameterBlock(params) && !problem_->IsParameterBlockConstant(params)) {
+        variable_cameras.push_back(id);
+      }
+    }
+    if (variable_images.size() >= 2) {
+      settled = std::make_unique<SettledCallback>(*reconstruction_, std::move(variable_images),
+                                                  std::move(variable_cameras),
+                                                  options_.settle_tolerance);
+      solver_options.callbacks.push_back(settled.get());
+      solver_options.update_state_every_iteration = true;
+    }
+  }
   ceres::Solve(solver_options, problem_.get(), &summary_);
 
   for (const image_t image_id : pose_blocks_) {
@@ -540,6 +641,7 @@ bool BundleAdjuster::Solve(Reconstruction* reconstruction) {
   report_.num_iterations = summary_.num_successful_steps + summary_.num_unsuccessful_steps;
   report_.linear_solver = ceres::LinearSolverTypeToString(summary_.linear_solver_type_used);
   report_.termination = ceres::TerminationTypeToString(summary_.termination_type);
+  report_.settled = settled && summary_.termination_type == ceres::USER_SUCCESS;
   report_.time_s = summary_.total_time_in_seconds;
   return report_.success;
 }

@@ -66,6 +66,14 @@ struct BundleAdjustmentOptions {
   double gradient_tolerance = 1e-10;
   // Stop when the relative step size falls below this.
   double parameter_tolerance = 1e-8;
+  // Stop once the cameras have settled: two successful steps in a row after which no
+  // variable camera centre moved by more than this fraction of the centres' spread (RMS
+  // distance from their mean), no camera turned by more than this many radians, and no
+  // refined intrinsic parameter changed by more than this fraction of max(|value|, 1). Far points, whose depth the
+  // images barely constrain, creep along their rays for dozens of steps after the cameras
+  // have converged, each step lowering the cost by just more than function_tolerance; this
+  // ends those tails. 0: off (Ceres' tolerances alone).
+  double settle_tolerance = 0.0;
   // Conjugate-gradient iterations per step of the iterative Schur solver.
   int max_linear_solver_iterations = 200;
   // Linear solver; kAuto picks one by the number of variable images.
@@ -166,6 +174,8 @@ struct BundleAdjustmentReport {
   int num_variable_cameras = 0;
   std::string linear_solver;
   std::string termination;
+  // The solve ended because the cameras had settled (settle_tolerance).
+  bool settled = false;
   double time_s = 0.0;
 };
 

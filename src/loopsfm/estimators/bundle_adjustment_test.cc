@@ -135,6 +135,16 @@ void Perturb(Reconstruction* reconstruction, const std::set<image_t>& keep, doub
   }
 }
 
+// Gaussian noise of `sigma` pixels on every observation.
+void AddPixelNoise(Reconstruction* reconstruction, double sigma, uint64_t seed) {
+  Random random(seed);
+  for (const image_t id : reconstruction->RegImageIds()) {
+    for (Point2D& point2D : reconstruction->GetImage(id).points2D) {
+      point2D.xy += sigma * Eigen::Vector2d(random.Normal(), random.Normal());
+    }
+  }
+}
+
 struct PoseErrors {
   double max_rotation_deg = 0.0;
   double max_centre = 0.0;
@@ -307,13 +317,8 @@ TEST(BundleAdjustment, NoisyObservationsGiveErrorsAtTheNoiseLevel) {
   const BundleAdjustmentConfig config = GaugeFixedConfig(truth);
   Reconstruction reconstruction = truth;
   Perturb(&reconstruction, {1, 2}, 0.8, 0.03, 0.03, 6);
-  Random random(7);
   constexpr double kSigma = 0.5;
-  for (const image_t id : reconstruction.RegImageIds()) {
-    for (Point2D& point2D : reconstruction.GetImage(id).points2D) {
-      point2D.xy += kSigma * Eigen::Vector2d(random.Normal(), random.Normal());
-    }
-  }
+  AddPixelNoise(&reconstruction, kSigma, 7);
   BundleAdjustmentOptions options;
   options.loss_function = BundleLossFunction::kTrivial;
   BundleAdjuster adjuster(options, config);
@@ -556,6 +561,44 @@ TEST(BundleAdjustment, SparseAndIterativeSchurSolversConverge) {
   }
 }
 
+TEST(BundleAdjustment, SettleToleranceEndsTheSolveOnceTheCamerasSettle) {
+  const Reconstruction truth = MakeArcScene(CameraModelId::kPinhole, 12, 400, 23);
+  const BundleAdjustmentConfig config = GaugeFixedConfig(truth);
+  Reconstruction start = truth;
+  Perturb(&start, {1, 2}, 0.8, 0.03, 0.03, 24);
+  AddPixelNoise(&start, 0.5, 25);
+  start.GetCamera(1).params[0] *= 1.02;
+  start.GetCamera(1).params[1] *= 1.02;
+  // Without Ceres' own tolerances the solver takes every step it is allowed.
+  BundleAdjustmentOptions options;
+  options.refine_focal_length = true;
+  options.function_tolerance = 0.0;
+  options.gradient_tolerance = 0.0;
+  options.parameter_tolerance = 0.0;
+  options.max_num_iterations = 40;
+  options.num_threads = 1;  // the same steps on every run
+  Reconstruction full = start;
+  BundleAdjuster full_adjuster(options, config);
+  ASSERT_TRUE(full_adjuster.Solve(&full)) << full_adjuster.FullReport();
+  EXPECT_FALSE(full_adjuster.report().settled);
+
+  options.settle_tolerance = 1e-6;
+  Reconstruction settled = start;
+  BundleAdjuster settled_adjuster(options, config);
+  ASSERT_TRUE(settled_adjuster.Solve(&settled)) << settled_adjuster.FullReport();
+  EXPECT_TRUE(settled_adjuster.report().settled);
+  EXPECT_LE(settled_adjuster.report().num_iterations, 12);
+  EXPECT_GT(full_adjuster.report().num_iterations, settled_adjuster.report().num_iterations);
+  // Where it stopped, the poses are those of the full solve, well below the noise's effect
+  // on them (a centre error of ~1e-2 against the truth, scene size ~12).
+  const PoseErrors difference = ComparePoses(full, settled);
+  EXPECT_LT(difference.max_centre, 2e-5);
+  EXPECT_LT(difference.max_rotation_deg, 2e-4);
+  EXPECT_NEAR(settled.GetCamera(1).params[0], full.GetCamera(1).params[0], 1e-3);  // 400 px
+  const PoseErrors error = ComparePoses(truth, AlignedToTruth(truth, settled));
+  EXPECT_GT(error.max_centre, 10 * difference.max_centre);
+}
+
 TEST(BundleAdjustment, GaugeFixUsesTheLargestComponent) {
   const Reconstruction truth = MakeArcScene(CameraModelId::kPinhole, 12, 50, 21);
   BundleAdjustmentConfig config;
@@ -577,6 +620,9 @@ TEST(BundleAdjustment, OptionsCheckRejectsBadValues) {
   EXPECT_THROW(options.Check(), InvalidArgument);
   options = BundleAdjustmentOptions();
   options.max_num_iterations = -1;
+  EXPECT_THROW(options.Check(), InvalidArgument);
+  options = BundleAdjustmentOptions();
+  options.settle_tolerance = -1e-6;
   EXPECT_THROW(options.Check(), InvalidArgument);
   options = BundleAdjustmentOptions();
   options.dense_schur_max_num_images = 2000;

@@ -248,10 +248,11 @@ bool MapperState::GlobalBundle(MapperReport* report,
   }
   const bool ok = ReportSolve(adjuster, &reconstruction_, "global", report);
   const BundleAdjustmentReport& solved = adjuster.report();
-  spdlog::debug("global bundle: {} frames, {} points, {} residual blocks, {} iterations, cost "
+  spdlog::debug("global bundle: {} frames, {} points, {} residual blocks, {} iterations{}, cost "
                 "{:.6g} -> {:.6g}, {:.1f} s",
                 solved.num_variable_images, solved.num_variable_points,
-                solved.num_residual_blocks, solved.num_iterations, solved.initial_cost,
+                solved.num_residual_blocks, solved.num_iterations,
+                solved.settled ? " (cameras settled)" : "", solved.initial_cost,
                 solved.final_cost, timer.ElapsedSeconds());
   report->num_global_ba_iterations += adjuster.report().num_iterations;
   report->num_global_ba_residuals += adjuster.report().num_residual_blocks;
