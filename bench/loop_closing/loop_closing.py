@@ -5,14 +5,20 @@ For each set the first run builds the database (frames, features, pairs); the ot
 maps a copy of it, so both see the same matches. Intrinsics may be made wrong on purpose
 (--focal-factor 1.04: focal 4 % too long, held fixed), which makes drift. Prints registered
 frames, models, ATE (% of path), rotation error, loop gap (mean / max, ground-truth units),
-map time, the loops closed and their time, and writes a top view per set
-(OUT/<set>_top.png: ground truth, posegraph with its loop links, none).
+map time (for COLMAP: its mapper's wall time), the loops closed and their time, and writes a
+top view per set (OUT/<set>_top.png: ground truth, posegraph with its loop links, none).
 
   bench/loop_closing/loop_closing.py --set NAME INPUT GROUNDTRUTH INTRINSICS \\
       [--set ...] [--focal-factor F] [--withhold] [--out DIR] [--loopsfm build/loopsfm]
+      [--colmap [BINARY]]
 
 --withhold maps without the pairs 50+ frames apart and adds them at the end
 (`reconstruct --withhold-loop-pairs`), so drift grows unchecked until the loops are closed.
+
+--colmap adds COLMAP 3.8's mapper on a copy of the same database (same matches, same wrong
+intrinsics held fixed: --Mapper.ba_refine_* 0). COLMAP has no withholding: it always sees the
+loop pairs while mapping, so compare it with a run without --withhold. Video input is decoded
+to frame_%06d.png (the names loopsfm gives video frames) for it.
 """
 import argparse
 import json
@@ -77,6 +83,29 @@ def summary(log):
     return float(map_s.group(1)) if map_s else float('nan'), loops, loop_s, models
 
 
+def run_colmap_mapper(colmap, media, base):
+    """COLMAP's mapper on a copy of the none run's database. Returns (its model folders, the
+    mapper's wall seconds)."""
+    out = f'{base}_colmap'
+    shutil.rmtree(out, ignore_errors=True)
+    os.makedirs(os.path.join(out, 'sparse'))
+    copy_database(f'{base}_none/database.db', os.path.join(out, 'database.db'))
+    images = media
+    if not os.path.isdir(media):
+        images = os.path.join(out, 'frames')
+        os.makedirs(images)
+        run(['ffmpeg', '-nostdin', '-loglevel', 'error', '-i', media, '-start_number', '0',
+             os.path.join(images, 'frame_%06d.png')], out + '_ffmpeg.log')
+    seconds = run([colmap, 'mapper', '--database_path', os.path.join(out, 'database.db'),
+                   '--image_path', images, '--output_path', os.path.join(out, 'sparse'),
+                   '--Mapper.ba_refine_focal_length', '0', '--Mapper.ba_refine_principal_point', '0',
+                   '--Mapper.ba_refine_extra_params', '0'], out + '.log')
+    models = [os.path.join(out, 'sparse', d) for d in sorted(os.listdir(os.path.join(out, 'sparse')))]
+    if not models:
+        sys.exit(f'COLMAP made no model; see {out}.log')
+    return models, seconds
+
+
 def evaluate(loopsfm, model, gt):
     out = subprocess.check_output([loopsfm, 'eval', model, gt, '--json'])
     return json.loads(out)
@@ -91,6 +120,8 @@ def main():
                         help='withhold the loop pairs until the end of mapping')
     parser.add_argument('--out', default='loop_closing_out')
     parser.add_argument('--loopsfm', default='build/loopsfm')
+    parser.add_argument('--colmap', nargs='?', const='colmap', default=None, metavar='BINARY',
+                        help="also run COLMAP 3.8's mapper on the same database")
     args = parser.parse_args()
     os.makedirs(args.out, exist_ok=True)
     rows = []
@@ -119,6 +150,16 @@ def main():
                          100 * (m['ate_fraction_of_path'] or float('nan')),
                          m['rotation_error_mean_deg'], gaps.get('mean'), gaps.get('max'),
                          map_s, len(loops), loop_s))
+        if args.colmap:
+            models, seconds = run_colmap_mapper(args.colmap, media, base)
+            m = max((evaluate(args.loopsfm, model, gt) for model in models),
+                    key=lambda e: e['num_matched'])
+            gaps = m.get('loop_gaps') or {}
+            rows.append((name, 'COLMAP 3.8 mapper (loop pairs while mapping)', m['num_matched'],
+                         m['num_gt_frames'], len(models),
+                         100 * (m['ate_fraction_of_path'] or float('nan')),
+                         m['rotation_error_mean_deg'], gaps.get('mean'), gaps.get('max'),
+                         seconds, None, None))
         subprocess.check_call([args.loopsfm, 'eval', os.path.join(outputs['posegraph'], 'sparse', '0'),
                                gt, '--plot', base + '_top.png', '--plot-also',
                                os.path.join(outputs['none'], 'sparse', '0'), '--plot-links',
@@ -131,7 +172,8 @@ def main():
     fmt = lambda v, f: 'n/a' if v is None else format(v, f)
     for r in rows:
         print(f'| {r[0]} | {r[1]} | {r[2]}/{r[3]} | {r[4]} | {r[5]:.4f} | {r[6]:.3f} | '
-              f'{fmt(r[7], ".4g")} | {fmt(r[8], ".4g")} | {r[9]:.1f} | {r[10]} | {r[11]:.1f} |')
+              f'{fmt(r[7], ".4g")} | {fmt(r[8], ".4g")} | {r[9]:.1f} | {fmt(r[10], "d")} | '
+              f'{fmt(r[11], ".1f")} |')
 
 
 if __name__ == '__main__':
