@@ -531,9 +531,12 @@ class SettledCallback : public ceres::IterationCallback {
     if (summary.iteration == 0 || !summary.step_is_successful || spread_ <= 0.0) {
       return ceres::SOLVER_CONTINUE;
     }
-    const std::vector<Eigen::Vector3d> centres = centres_;
-    const std::vector<Eigen::Quaterniond> rotations = rotations_;
-    const std::vector<double> params = params_;
+    std::vector<Eigen::Vector3d> centres;
+    std::vector<Eigen::Quaterniond> rotations;
+    std::vector<double> params;
+    centres.swap(centres_);
+    rotations.swap(rotations_);
+    params.swap(params_);
     Snapshot();
     double max_move = 0.0, max_turn = 0.0, max_change = 0.0;
     for (size_t i = 0; i < centres_.size(); ++i) {

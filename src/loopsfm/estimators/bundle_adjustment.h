@@ -69,10 +69,10 @@ struct BundleAdjustmentOptions {
   // Stop once the cameras have settled: two successful steps in a row after which no
   // variable camera centre moved by more than this fraction of the centres' spread (RMS
   // distance from their mean), no camera turned by more than this many radians, and no
-  // refined intrinsic parameter changed by more than this fraction of max(|value|, 1). Far points, whose depth the
-  // images barely constrain, creep along their rays for dozens of steps after the cameras
-  // have converged, each step lowering the cost by just more than function_tolerance; this
-  // ends those tails. 0: off (Ceres' tolerances alone).
+  // refined intrinsic parameter changed by more than this fraction of max(|value|, 1).
+  // Far points, whose depth the images barely constrain, creep along their rays for dozens
+  // of steps after the cameras have converged, each step lowering the cost by just more
+  // than function_tolerance; this ends those tails. 0: off (Ceres' tolerances alone).
   double settle_tolerance = 0.0;
   // Conjugate-gradient iterations per step of the iterative Schur solver.
   int max_linear_solver_iterations = 200;
