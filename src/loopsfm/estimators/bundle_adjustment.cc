@@ -5,6 +5,7 @@
 #include <optional>
 #include <thread>
 
+#include "loopsfm/estimators/bundle_settled.h"
 #include "loopsfm/estimators/cost_functions/reprojection_error.h"
 #include "loopsfm/util/errors.h"
 
@@ -504,84 +505,6 @@ void BundleAdjuster::ConfigureSolver(ceres::Solver::Options* solver_options) {
   solver_options->logging_type =
       options_.print_progress ? ceres::PER_MINIMIZER_ITERATION : ceres::SILENT;
 }
-
-namespace {
-
-// Ends the solve once the variable poses and camera parameters have settled
-// (BundleAdjustmentOptions::settle_tolerance). Needs update_state_every_iteration: it reads
-// them from the reconstruction after each step.
-class SettledCallback : public ceres::IterationCallback {
- public:
-  SettledCallback(const Reconstruction& reconstruction, std::vector<image_t> image_ids,
-                  std::vector<camera_t> camera_ids, double tolerance)
-      : reconstruction_(reconstruction),
-        image_ids_(std::move(image_ids)),
-        camera_ids_(std::move(camera_ids)),
-        tolerance_(tolerance) {
-    Snapshot();
-    Eigen::Vector3d mean = Eigen::Vector3d::Zero();
-    for (const Eigen::Vector3d& c : centres_) mean += c;
-    mean /= static_cast<double>(centres_.size());
-    double sum = 0.0;
-    for (const Eigen::Vector3d& c : centres_) sum += (c - mean).squaredNorm();
-    spread_ = std::sqrt(sum / static_cast<double>(centres_.size()));
-  }
-
-  ceres::CallbackReturnType operator()(const ceres::IterationSummary& summary) override {
-    if (summary.iteration == 0 || !summary.step_is_successful || spread_ <= 0.0) {
-      return ceres::SOLVER_CONTINUE;
-    }
-    std::vector<Eigen::Vector3d> centres;
-    std::vector<Eigen::Quaterniond> rotations;
-    std::vector<double> params;
-    centres.swap(centres_);
-    rotations.swap(rotations_);
-    params.swap(params_);
-    Snapshot();
-    double max_move = 0.0, max_turn = 0.0, max_change = 0.0;
-    for (size_t i = 0; i < centres_.size(); ++i) {
-      max_move = std::max(max_move, (centres_[i] - centres[i]).norm());
-      max_turn = std::max(max_turn, rotations_[i].angularDistance(rotations[i]));
-    }
-    for (size_t i = 0; i < params_.size(); ++i) {
-      max_change = std::max(max_change, std::abs(params_[i] - params[i]) /
-                                            std::max(std::abs(params[i]), 1.0));
-    }
-    const bool settled = max_move <= tolerance_ * spread_ && max_turn <= tolerance_ &&
-                         max_change <= tolerance_;
-    num_settled_ = settled ? num_settled_ + 1 : 0;
-    return num_settled_ >= 2 ? ceres::SOLVER_TERMINATE_SUCCESSFULLY : ceres::SOLVER_CONTINUE;
-  }
-
- private:
-  void Snapshot() {
-    centres_.clear();
-    rotations_.clear();
-    params_.clear();
-    for (const image_t id : image_ids_) {
-      const Rigid3d& pose = reconstruction_.GetImage(id).cam_from_world;
-      const Eigen::Quaterniond rotation = pose.rotation.normalized();
-      rotations_.push_back(rotation);
-      centres_.push_back(-(rotation.inverse() * pose.translation));
-    }
-    for (const camera_t id : camera_ids_) {
-      const std::vector<double>& values = reconstruction_.GetCamera(id).params;
-      params_.insert(params_.end(), values.begin(), values.end());
-    }
-  }
-
-  const Reconstruction& reconstruction_;
-  const std::vector<image_t> image_ids_;
-  const std::vector<camera_t> camera_ids_;
-  const double tolerance_;
-  double spread_ = 0.0;
-  int num_settled_ = 0;
-  std::vector<Eigen::Vector3d> centres_;
-  std::vector<Eigen::Quaterniond> rotations_;
-  std::vector<double> params_;
-};
-
-}  // namespace
 
 bool BundleAdjuster::Solve(Reconstruction* reconstruction) {
   if (problem_ == nullptr) SetUp(reconstruction);
