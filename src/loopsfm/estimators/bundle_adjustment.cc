@@ -506,6 +506,17 @@ void BundleAdjuster::ConfigureSolver(ceres::Solver::Options* solver_options) {
       options_.print_progress ? ceres::PER_MINIMIZER_ITERATION : ceres::SILENT;
 }
 
+std::vector<camera_t> BundleAdjuster::VariableCameras() const {
+  std::vector<camera_t> variable;
+  for (const camera_t id : Sorted(cameras_added_)) {
+    const double* params = reconstruction_->GetCamera(id).params.data();
+    if (problem_->HasParameterBlock(params) && !problem_->IsParameterBlockConstant(params)) {
+      variable.push_back(id);
+    }
+  }
+  return variable;
+}
+
 bool BundleAdjuster::Solve(Reconstruction* reconstruction) {
   if (problem_ == nullptr) SetUp(reconstruction);
   LOOPSFM_CHECK_MSG(reconstruction == reconstruction_,
@@ -527,17 +538,9 @@ bool BundleAdjuster::Solve(Reconstruction* reconstruction) {
       const double* rotation = reconstruction_->GetImage(id).cam_from_world.rotation.coeffs().data();
       if (!problem_->IsParameterBlockConstant(rotation)) variable_images.push_back(id);
     }
-    std::vector<camera_t> variable_cameras;
-    for (const camera_t id : Sorted(cameras_added_)) {
-      const double* params = reconstruction_->GetCamera(id).params.data();
-      if (problem_->HasParameterBlock(params) && !problem_->IsParameterBlockConstant(params)) {
-        variable_cameras.push_back(id);
-      }
-    }
     if (variable_images.size() >= 2) {
       settled = std::make_unique<SettledCallback>(*reconstruction_, std::move(variable_images),
-                                                  std::move(variable_cameras),
-                                                  options_.settle_tolerance);
+                                                  VariableCameras(), options_.settle_tolerance);
       solver_options.callbacks.push_back(settled.get());
       solver_options.update_state_every_iteration = true;
     }
@@ -554,13 +557,7 @@ bool BundleAdjuster::Solve(Reconstruction* reconstruction) {
       ++report_.num_variable_points;
     }
   }
-  report_.num_variable_cameras = 0;
-  for (const camera_t id : cameras_added_) {
-    const double* params = reconstruction_->GetCamera(id).params.data();
-    if (problem_->HasParameterBlock(params) && !problem_->IsParameterBlockConstant(params)) {
-      ++report_.num_variable_cameras;
-    }
-  }
+  report_.num_variable_cameras = static_cast<int>(VariableCameras().size());
   report_.success = summary_.IsSolutionUsable();
   report_.initial_cost = summary_.initial_cost;
   report_.final_cost = summary_.final_cost;

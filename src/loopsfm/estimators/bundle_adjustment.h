@@ -223,6 +223,8 @@ class BundleAdjuster {
   // Whether the camera's parameters stay fixed in this problem (they are then data in the
   // residuals, not a parameter block).
   bool IsCameraConstant(camera_t camera_id) const;
+  // Cameras whose parameters are a variable block of the problem, in id order.
+  std::vector<camera_t> VariableCameras() const;
   void AddPoseBlocks(image_t image_id);
   void ParameterizeCameras();
   void ConfigureSolver(ceres::Solver::Options* solver_options);
