@@ -5,6 +5,7 @@
 
 #include "loopsfm/cli/commands.h"
 #include "loopsfm/cli/stage_flags.h"
+#include "loopsfm/math/random.h"
 #include "loopsfm/pipeline/reconstruct.h"
 #include "loopsfm/util/errors.h"
 #include "loopsfm/util/logging.h"
@@ -119,6 +120,7 @@ void AddReconstructCommand(CLI::App& app) {
     bool alternate_poses = false;
     bool overwrite = false;
     double checkpoint_every = 60.0;
+    uint64_t seed = kDefaultRandomSeed;
   };
   auto flags = std::make_shared<Flags>();
   CLI::App* cmd = app.add_subcommand(
@@ -168,6 +170,11 @@ void AddReconstructCommand(CLI::App& app) {
                   "one after a finished run skips mapping). 0: no checkpoints")
       ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
+  cmd->add_option("--seed", flags->seed,
+                  "Seed of the mapper's random sampling (registration RANSAC, loop closing): "
+                  "a rerun with the same seed repeats the model; other seeds show how much a "
+                  "result owes to chance. Matching keeps its own seed")
+      ->capture_default_str();
   cmd->add_flag("--alternate-poses", flags->alternate_poses,
                 "Diagnostic: after each registration, a second RANSAC over the correspondences "
                 "the first rejected; writes OUT/registrations.csv (both rounds' inliers, and "
@@ -196,6 +203,7 @@ void AddReconstructCommand(CLI::App& app) {
     options.mapper.loop_closure.method = method->second;
     options.mapper.loop_closure.withhold_loop_pairs = flags->withhold_loop_pairs;
     options.mapper.record_alternate_poses = flags->alternate_poses;
+    options.mapper.seed = flags->seed;
     options.overwrite = flags->overwrite;
     options.checkpoint_interval_seconds = flags->checkpoint_every;
     options.self_calibrate = !flags->no_self_calibration;
