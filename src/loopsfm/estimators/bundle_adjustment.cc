@@ -309,7 +309,7 @@ void BundleAdjuster::AddImage(image_t image_id) {
 
   const bool constant_camera = IsCameraConstant(image.camera_id);
   for (const Point2D& point2D : image.points2D) {
-    if (!point2D.HasPoint3D()) continue;
+    if (!point2D.HasPoint3D() || !config_.InPointSubset(point2D.point3D_id)) continue;
     Point3D& point = reconstruction_->GetPoint3D(point2D.point3D_id);
     points_added_.insert(point2D.point3D_id);
     if (constant_pose) {

@@ -19,6 +19,7 @@
 #include <memory>
 #include <string>
 #include <unordered_map>
+#include <optional>
 #include <unordered_set>
 #include <vector>
 
@@ -135,6 +136,15 @@ class BundleAdjustmentConfig {
   const std::unordered_set<point3D_t>& VariablePoints() const { return variable_points_; }
   const std::unordered_set<point3D_t>& ConstantPoints() const { return constant_points_; }
 
+  // Only observations of these points enter (a subset bundle: the cameras move with a
+  // fraction of the residuals, the other points stay where they are). Not called: all.
+  void RestrictToPoints(std::unordered_set<point3D_t> point3D_ids) {
+    point_subset_ = std::move(point3D_ids);
+  }
+  bool InPointSubset(point3D_t id) const {
+    return !point_subset_ || point_subset_->count(id) > 0;
+  }
+
   // Intrinsics of a camera stay fixed whatever the refine_* options say.
   void SetConstantCamera(camera_t camera_id) { constant_cameras_.insert(camera_id); }
   void SetVariableCamera(camera_t camera_id) { constant_cameras_.erase(camera_id); }
@@ -149,6 +159,7 @@ class BundleAdjustmentConfig {
   std::unordered_set<point3D_t> variable_points_;
   std::unordered_set<point3D_t> constant_points_;
   std::unordered_set<camera_t> constant_cameras_;
+  std::optional<std::unordered_set<point3D_t>> point_subset_;
 };
 
 // Fixes the seven-degree-of-freedom gauge of a reconstruction through two of its images:

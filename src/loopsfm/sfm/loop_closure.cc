@@ -30,6 +30,12 @@ void LoopClosureOptions::Check() const {
   LOOPSFM_REQUIRE_OPTION(covisibility_min_points >= 1, "loop: co-visibility needs a point");
   LOOPSFM_REQUIRE_OPTION(loop_edge_weight > 0, "loop: edge weight must be positive");
   LOOPSFM_REQUIRE_OPTION(split_weight > 0, "loop: split weight must be positive");
+  LOOPSFM_REQUIRE_OPTION(refine_points_per_frame >= 0,
+                         "loop: refine_points_per_frame must be >= 0 (got {})",
+                         refine_points_per_frame);
+  LOOPSFM_REQUIRE_OPTION(polish_settle_tolerance >= 0,
+                         "loop: polish_settle_tolerance must be >= 0 (got {})",
+                         polish_settle_tolerance);
 }
 
 MapperInput WithoutLoopPairs(const MapperInput& input, int min_frame_gap) {
@@ -75,13 +81,18 @@ Reconstruction CloseLoopsAfterMapping(const MapperInput& input, const Reconstruc
   const double seconds_triangulation = timer.ElapsedSeconds();
   report->seconds_triangulation += seconds_triangulation;
   const LoopClosureOptions& loop = options.loop_closure;
+  bool corrected = false;
   if (loop.CloseWhileMapping()) {
     LoopCloser closer(input, loop, options.seed + 1, /*refine=*/false);
-    for (image_t id : ordered) closer.AfterRegistration(state, id, report);
+    for (image_t id : ordered) corrected |= closer.AfterRegistration(state, id, report);
   }
   // Split tracks start from a refined map after the pose graph, from the map as triangulated
   // without it; their pass ends with a bundle of its own.
-  if (!loop.SplitTracks() || loop.CloseWhileMapping()) state.GlobalRefinement(report);
+  if (corrected) {
+    state.RefineAfterCorrection(report);
+  } else if (!loop.SplitTracks() || loop.CloseWhileMapping()) {
+    state.GlobalRefinement(report);
+  }
   if (loop.SplitTracks()) {
     Random split_random(options.seed + 2);
     const int tied = CloseLoopsBySplitTracks(state, loop, split_random, report);
@@ -420,7 +431,7 @@ void LoopCloser::Close(MapperState& model, const Sim3d& old_from_recent,
     rec.GetImage(id).cam_from_world = node.ToRigid().Inverse();
   }
   if (refine_) {
-    model.GlobalRefinement(report);
+    model.RefineAfterCorrection(report);
   } else {
     model.RetriangulateAll();
   }

@@ -1,5 +1,8 @@
 #include "loopsfm/sfm/loop_closure.h"
 
+#include <map>
+#include <unordered_set>
+
 #include <gtest/gtest.h>
 
 #include "loopsfm/sfm/mapper_state.h"
@@ -111,6 +114,71 @@ TEST(AlternatePose, ConsistentMapHasOnePose) {
   ASSERT_EQ(report.registrations.size(), 1u);
   EXPECT_FALSE(report.registrations[0].second_pose_found);
   EXPECT_GT(report.registrations[0].num_inliers, 0.9 * report.registrations[0].num_correspondences);
+}
+
+// The walk registered at its true poses, then every frame but the two gauge frames moved
+// and turned at random, its points left where they were: a map as a pose-graph correction
+// leaves it, its cameras far from the bundle's optimum.
+void RegisterThenDisturb(const MapperProblem& p, MapperState& state) {
+  RegisterWithDrift(p, state, 0.0);
+  Random random(21);
+  for (size_t i = 2; i < p.input.frames.size(); ++i) {
+    Rigid3d& pose = state.reconstruction().GetImage(p.input.frames[i].image_id).cam_from_world;
+    const Eigen::Vector3d axis = Eigen::Vector3d(random.Normal(), random.Normal(),
+                                                 random.Normal()).normalized();
+    pose.rotation = Eigen::Quaterniond(Eigen::AngleAxisd(0.005, axis)) * pose.rotation;
+    pose.translation += 0.03 * Eigen::Vector3d(random.Normal(), random.Normal(),
+                                               random.Normal());
+  }
+}
+
+TEST(MapperState, SubsetBundleTakesTheLongestWellTriangulatedTracksOfEveryFrame) {
+  const MapperProblem p = WalkOutAndBack();
+  const IncrementalMapperOptions options = LoopOptions();
+  MapperState state(p.input, options);
+  RegisterWithDrift(p, state, 0.0);
+  const Reconstruction& rec = state.reconstruction();
+  const int per_frame = 40;
+  const std::unordered_set<point3D_t> subset = state.LongestTrackPoints(per_frame);
+  ASSERT_LT(subset.size(), rec.NumPoints3D() / 2);
+  std::map<image_t, int> taken;
+  size_t shortest_taken = 1000;
+  for (point3D_t id : subset) {
+    const Point3D& point = rec.GetPoint3D(id);
+    shortest_taken = std::min(shortest_taken, point.track.Length());
+    for (const TrackElement& el : point.track.elements) ++taken[el.image_id];
+  }
+  for (image_t id : rec.RegImageIds()) EXPECT_GE(taken[id], per_frame) << "frame " << id;
+  // Longest first: a frame's points left out are no longer than the shortest it took, or
+  // the frame had enough already.
+  size_t longer_left_out = 0;
+  for (const auto& [id, point] : rec.Points3D()) {
+    longer_left_out += subset.count(id) == 0 && point.track.Length() > shortest_taken + 2;
+  }
+  EXPECT_LT(longer_left_out, rec.NumPoints3D() / 2);
+}
+
+TEST(MapperState, RefinementAfterACorrectionEndsWhereTheFullBundleDoes) {
+  const MapperProblem p = WalkOutAndBack();
+  IncrementalMapperOptions options = LoopOptions();
+  options.loop_closure.refine_points_per_frame = 40;
+  MapperState full(p.input, options), subset(p.input, options);
+  RegisterThenDisturb(p, full);
+  RegisterThenDisturb(p, subset);
+  const testing::PoseError disturbed = testing::ComparePoses(full.reconstruction(), p);
+  MapperReport full_report, subset_report;
+  full.GlobalRefinement(&full_report);
+  subset.RefineAfterCorrection(&subset_report);
+  EXPECT_EQ(subset_report.num_global_ba, full_report.num_global_ba + 1);
+  const testing::PoseError after_full = testing::ComparePoses(full.reconstruction(), p);
+  const testing::PoseError after_subset = testing::ComparePoses(subset.reconstruction(), p);
+  EXPECT_LT(after_full.max_centre_error, 0.1 * disturbed.max_centre_error);
+  EXPECT_LT(after_subset.max_centre_error, 0.1 * disturbed.max_centre_error);
+  // As close to the truth as the full bundle's answer (the same up to the solvers' ends).
+  EXPECT_NEAR(after_subset.max_centre_error, after_full.max_centre_error,
+              0.05 * after_full.max_centre_error);
+  EXPECT_NEAR(after_subset.max_rotation_deg, after_full.max_rotation_deg,
+              0.05 * after_full.max_rotation_deg + 1e-3);
 }
 
 TEST(LoopCloser, OptionsAreChecked) {

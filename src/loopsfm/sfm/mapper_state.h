@@ -11,7 +11,9 @@
 // points are deleted.
 
 #include <functional>
+#include <optional>
 #include <unordered_map>
+#include <unordered_set>
 #include <vector>
 
 #include "loopsfm/estimators/bundle_adjustment.h"
@@ -95,14 +97,31 @@ class MapperState {
   // Bundle over the image and the frames sharing most points with it, then filtering of
   // the points involved. Returns false when the solver failed (the model is unchanged).
   bool LocalBundle(image_t image_id, MapperReport* report);
-  // Bundle over all registered frames, with extra terms added by `add_terms` once the
-  // problem is set up (loop closing's point constraints). Returns false when the solver
-  // failed.
-  bool GlobalBundle(MapperReport* report,
-                    const std::function<void(BundleAdjuster&)>& add_terms = {});
+  // What a global bundle holds beyond every registered frame and its points.
+  struct GlobalBundleScope {
+    // Extra terms, added once the problem is set up (loop closing's point constraints).
+    std::function<void(BundleAdjuster&)> add_terms;
+    // Only these points' observations enter (BundleAdjustmentConfig::RestrictToPoints).
+    std::optional<std::unordered_set<point3D_t>> points;
+    // Replaces BundleAdjustmentOptions::Global()'s settle tolerance.
+    std::optional<double> settle_tolerance;
+  };
+  // Bundle over all registered frames. Returns false when the solver failed.
+  bool GlobalBundle(MapperReport* report, const GlobalBundleScope& scope = {});
   // Global bundle, re-triangulation and merging of all tracks, filtering, and a second
-  // bundle when those changed much.
-  void GlobalRefinement(MapperReport* report);
+  // bundle when those changed much (both bundles with `settle_tolerance` when set).
+  void GlobalRefinement(MapperReport* report, std::optional<double> settle_tolerance = {});
+  // Global refinement after a correction moved the cameras far from the bundle's optimum
+  // (a loop closed by the pose graph): first a bundle over the longest tracks only, then
+  // the other points re-triangulated from the moved cameras, then GlobalRefinement ending
+  // at LoopClosureOptions::polish_settle_tolerance.
+  void RefineAfterCorrection(MapperReport* report);
+  // Well-triangulated points of the longest tracks, taken longest first while one of their
+  // frames has fewer than `per_frame` of them: every frame keeps its best-observed points.
+  std::unordered_set<point3D_t> LongestTrackPoints(int per_frame) const;
+  // Moves each point to the position its observations give with the current poses
+  // (multi-view triangulation; points it fails for stay where they are).
+  void RepositionPoints(const std::vector<point3D_t>& point_ids);
 
  private:
   // Triangulates, extends or merges one track; returns observations added.

@@ -2,11 +2,13 @@
 
 #include <algorithm>
 #include <cmath>
+#include <unordered_map>
 
 #include "loopsfm/estimators/absolute_pose.h"
 #include "loopsfm/estimators/bundle_adjustment.h"
 #include "loopsfm/estimators/cost_functions/focal_prior.h"
 #include "loopsfm/estimators/reprojection.h"
+#include "loopsfm/geometry/triangulation.h"
 #include "loopsfm/sfm/mapper_state.h"
 #include "loopsfm/util/logging.h"
 #include "loopsfm/util/timer.h"
@@ -199,14 +201,15 @@ bool MapperState::LocalBundle(image_t image_id, MapperReport* report) {
   return ok;
 }
 
-bool MapperState::GlobalBundle(MapperReport* report,
-                               const std::function<void(BundleAdjuster&)>& add_terms) {
+bool MapperState::GlobalBundle(MapperReport* report, const GlobalBundleScope& scope) {
   Timer timer;
   BundleAdjustmentConfig config;
   for (image_t id : reconstruction_.RegImageIds()) config.AddImage(id);
   FixGaugeWithTwoImages(reconstruction_, gauge1_, gauge2_, &config);
+  if (scope.points) config.RestrictToPoints(*scope.points);
   BundleAdjustmentOptions ba_options = BundleAdjustmentOptions::Global();
   ba_options.num_threads = options_.num_threads > 0 ? options_.num_threads : -1;
+  if (scope.settle_tolerance) ba_options.settle_tolerance = *scope.settle_tolerance;
   // A camera's parameters are refined by what its kind of intrinsics asks for, and only
   // once the model has enough frames to constrain them.
   const size_t num_frames = reconstruction_.NumRegImages();
@@ -242,9 +245,9 @@ bool MapperState::GlobalBundle(MapperReport* report,
           nullptr, camera.params.data());
     }
   }
-  if (add_terms) {
+  if (scope.add_terms) {
     if (!adjuster.IsSetUp()) adjuster.SetUp(&reconstruction_);
-    add_terms(adjuster);
+    scope.add_terms(adjuster);
   }
   const bool ok = ReportSolve(adjuster, &reconstruction_, "global", report);
   const BundleAdjustmentReport& solved = adjuster.report();
@@ -261,16 +264,91 @@ bool MapperState::GlobalBundle(MapperReport* report,
   return ok;
 }
 
-void MapperState::GlobalRefinement(MapperReport* report) {
-  GlobalBundle(report);
+void MapperState::GlobalRefinement(MapperReport* report,
+                                   std::optional<double> settle_tolerance) {
+  const GlobalBundleScope scope{.settle_tolerance = settle_tolerance};
+  GlobalBundle(report, scope);
   Timer tri_timer;
   const size_t added = RetriangulateAll();
   report->seconds_triangulation += tri_timer.ElapsedSeconds();
   const size_t removed = FilterPoints({});
   const size_t observations = reconstruction_.ComputeNumObservations();
   if (added + removed > 0.02 * observations) {
-    GlobalBundle(report);
+    GlobalBundle(report, scope);
     FilterPoints({});
+  }
+}
+
+void MapperState::RefineAfterCorrection(MapperReport* report) {
+  const LoopClosureOptions& loop = options_.loop_closure;
+  if (loop.refine_points_per_frame > 0) {
+    std::unordered_set<point3D_t> subset = LongestTrackPoints(loop.refine_points_per_frame);
+    std::vector<point3D_t> others;
+    for (const auto& [id, point] : reconstruction_.Points3D()) {
+      if (subset.count(id) == 0) others.push_back(id);
+    }
+    GlobalBundle(report, {.points = std::move(subset)});
+    Timer tri_timer;
+    RepositionPoints(others);
+    report->seconds_triangulation += tri_timer.ElapsedSeconds();
+  }
+  GlobalRefinement(report, loop.polish_settle_tolerance);
+}
+
+std::unordered_set<point3D_t> MapperState::LongestTrackPoints(int per_frame) const {
+  // Long tracks of distant points see them under a small angle: their depth is barely
+  // constrained, and a bundle of few points with many of them is ill-conditioned (Cholesky
+  // failures, cameras left off). Only points seen under twice the triangulation angle (its
+  // widest from the first observer) are taken.
+  const double min_angle = 2.0 * options_.min_tri_angle_deg * M_PI / 180.0;
+  std::vector<std::pair<size_t, point3D_t>> by_length;  // (track length, id)
+  for (const auto& [id, point] : reconstruction_.Points3D()) {
+    const auto& elements = point.track.elements;
+    const Eigen::Vector3d first = reconstruction_.GetImage(elements[0].image_id).ProjectionCenter();
+    double widest = 0.0;
+    for (size_t k = 1; k < elements.size() && widest < min_angle; ++k) {
+      const Image& other = reconstruction_.GetImage(elements[k].image_id);
+      widest = std::max(widest,
+                        CalculateTriangulationAngle(first, other.ProjectionCenter(), point.xyz));
+    }
+    if (widest < min_angle) continue;
+    by_length.push_back({elements.size(), id});
+  }
+  std::sort(by_length.begin(), by_length.end(), [](const auto& a, const auto& b) {
+    return a.first != b.first ? a.first > b.first : a.second < b.second;
+  });
+  std::unordered_map<image_t, int> taken;
+  std::unordered_set<point3D_t> subset;
+  for (const auto& [length, id] : by_length) {
+    const auto& elements = reconstruction_.GetPoint3D(id).track.elements;
+    const bool wanted = std::any_of(elements.begin(), elements.end(), [&](const TrackElement& el) {
+      return taken[el.image_id] < per_frame;
+    });
+    if (!wanted) continue;
+    subset.insert(id);
+    for (const TrackElement& el : elements) ++taken[el.image_id];
+  }
+  return subset;
+}
+
+void MapperState::RepositionPoints(const std::vector<point3D_t>& point_ids) {
+  TriangulationOptions tri_options;
+  tri_options.min_tri_angle_deg = 0.0;
+  tri_options.max_angular_error_deg = 90.0;  // where the point goes is all that is asked
+  std::vector<Matrix3x4d> poses;
+  std::vector<Eigen::Vector2d> normalized;
+  for (point3D_t id : point_ids) {
+    Point3D& point = reconstruction_.GetPoint3D(id);
+    poses.clear();
+    normalized.clear();
+    for (const TrackElement& el : point.track.elements) {
+      const Image& image = reconstruction_.GetImage(el.image_id);
+      poses.push_back(image.cam_from_world.ToMatrix());
+      normalized.push_back(reconstruction_.GetCamera(image.camera_id)
+                               .CamFromImg(image.points2D[el.point2D_idx].xy));
+    }
+    const TriangulationReport result = TriangulateMultiViewChecked(poses, normalized, tri_options);
+    if (result.success()) point.xyz = result.point3D_in_world;
   }
 }
 

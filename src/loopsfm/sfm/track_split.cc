@@ -140,7 +140,7 @@ int CloseLoopsBySplitTracks(MapperState& model, const LoopClosureOptions& option
   }
   KeepPathBeforeLoopClosing(input, rec, report);
   const size_t points_before = rec.NumPoints3D();
-  model.GlobalBundle(report, [&](BundleAdjuster& adjuster) {
+  model.GlobalBundle(report, {.add_terms = [&](BundleAdjuster& adjuster) {
     for (const SplitPair& pair : tied) {
       const Point3D& old = rec.GetPoint3D(pair.old_id);
       const Point3D& recent = rec.GetPoint3D(pair.recent_id);
@@ -152,7 +152,7 @@ int CloseLoopsBySplitTracks(MapperState& model, const LoopClosureOptions& option
           PointCoincidenceCost::Create(options.split_weight * focal / depth), nullptr,
           adjuster.PointBlock(pair.old_id), adjuster.PointBlock(pair.recent_id));
     }
-  });
+  }});
   model.RetriangulateAll();
   model.FilterPoints({});
   model.GlobalBundle(report);
