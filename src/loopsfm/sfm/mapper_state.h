@@ -116,6 +116,12 @@ class MapperState {
   // the other points re-triangulated from the moved cameras, then GlobalRefinement ending
   // at LoopClosureOptions::polish_settle_tolerance.
   void RefineAfterCorrection(MapperReport* report);
+  // The first half of that: a global bundle over the points LongestTrackPoints(per_frame)
+  // picks and `also` (with `add_terms`), then the other points re-triangulated from the
+  // moved cameras.
+  void SubsetBundle(MapperReport* report, int per_frame,
+                    const std::function<void(BundleAdjuster&)>& add_terms = {},
+                    const std::vector<point3D_t>& also = {});
   // Well-triangulated points of the longest tracks, taken longest first while one of their
   // frames has fewer than `per_frame` of them: every frame keeps its best-observed points.
   std::unordered_set<point3D_t> LongestTrackPoints(int per_frame) const;

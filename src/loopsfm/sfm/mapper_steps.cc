@@ -282,17 +282,26 @@ void MapperState::GlobalRefinement(MapperReport* report,
 void MapperState::RefineAfterCorrection(MapperReport* report) {
   const LoopClosureOptions& loop = options_.loop_closure;
   if (loop.refine_points_per_frame > 0) {
-    std::unordered_set<point3D_t> subset = LongestTrackPoints(loop.refine_points_per_frame);
-    std::vector<point3D_t> others;
-    for (const auto& [id, point] : reconstruction_.Points3D()) {
-      if (subset.count(id) == 0) others.push_back(id);
-    }
-    GlobalBundle(report, {.points = std::move(subset)});
-    Timer tri_timer;
-    RepositionPoints(others);
-    report->seconds_triangulation += tri_timer.ElapsedSeconds();
+    SubsetBundle(report, loop.refine_points_per_frame);
+    GlobalRefinement(report, loop.polish_settle_tolerance);
+  } else {
+    GlobalRefinement(report);
   }
-  GlobalRefinement(report, loop.polish_settle_tolerance);
+}
+
+void MapperState::SubsetBundle(MapperReport* report, int per_frame,
+                               const std::function<void(BundleAdjuster&)>& add_terms,
+                               const std::vector<point3D_t>& also) {
+  std::unordered_set<point3D_t> subset = LongestTrackPoints(per_frame);
+  subset.insert(also.begin(), also.end());
+  std::vector<point3D_t> others;
+  for (const auto& [id, point] : reconstruction_.Points3D()) {
+    if (subset.count(id) == 0) others.push_back(id);
+  }
+  GlobalBundle(report, {.add_terms = add_terms, .points = std::move(subset)});
+  Timer tri_timer;
+  RepositionPoints(others);
+  report->seconds_triangulation += tri_timer.ElapsedSeconds();
 }
 
 std::unordered_set<point3D_t> MapperState::LongestTrackPoints(int per_frame) const {

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <map>
+#include <optional>
 #include <unordered_map>
 #include <unordered_set>
 
@@ -140,7 +141,7 @@ int CloseLoopsBySplitTracks(MapperState& model, const LoopClosureOptions& option
   }
   KeepPathBeforeLoopClosing(input, rec, report);
   const size_t points_before = rec.NumPoints3D();
-  model.GlobalBundle(report, {.add_terms = [&](BundleAdjuster& adjuster) {
+  const auto tie_pairs = [&](BundleAdjuster& adjuster) {
     for (const SplitPair& pair : tied) {
       const Point3D& old = rec.GetPoint3D(pair.old_id);
       const Point3D& recent = rec.GetPoint3D(pair.recent_id);
@@ -152,7 +153,20 @@ int CloseLoopsBySplitTracks(MapperState& model, const LoopClosureOptions& option
           PointCoincidenceCost::Create(options.split_weight * focal / depth), nullptr,
           adjuster.PointBlock(pair.old_id), adjuster.PointBlock(pair.recent_id));
     }
-  }});
+  };
+  // As after a pose-graph correction, the cameras start far from where the ties take them:
+  // a bundle over the longest tracks and the tied points moves them first.
+  std::optional<double> polish;
+  if (options.refine_points_per_frame > 0) {
+    std::vector<point3D_t> tied_points;
+    for (const SplitPair& pair : tied) {
+      tied_points.push_back(pair.old_id);
+      tied_points.push_back(pair.recent_id);
+    }
+    model.SubsetBundle(report, options.refine_points_per_frame, tie_pairs, tied_points);
+    polish = options.polish_settle_tolerance;
+  }
+  model.GlobalBundle(report, {.add_terms = tie_pairs, .settle_tolerance = polish});
   model.RetriangulateAll();
   model.FilterPoints({});
   model.GlobalBundle(report);
