@@ -210,9 +210,6 @@ size_t MapperState::TriangulateNewPoints(std::vector<TrackElement> elements) {
 }
 
 void MapperState::MergePointsOfTrack(int track) {
-  TriangulationOptions tri_options;
-  tri_options.min_tri_angle_deg = 0.0;
-  tri_options.max_angular_error_deg = 90.0;  // checked below in pixels
   bool merged = true;
   while (merged) {
     merged = false;
@@ -222,15 +219,7 @@ void MapperState::MergePointsOfTrack(int track) {
         std::vector<TrackElement> elements = reconstruction_.GetPoint3D(points[a]).track.elements;
         const auto& more = reconstruction_.GetPoint3D(points[b]).track.elements;
         elements.insert(elements.end(), more.begin(), more.end());
-        std::vector<Matrix3x4d> poses;
-        std::vector<Eigen::Vector2d> normalized;
-        for (const TrackElement& el : elements) {
-          const Image& image = reconstruction_.GetImage(el.image_id);
-          poses.push_back(image.cam_from_world.ToMatrix());
-          normalized.push_back(reconstruction_.GetCamera(image.camera_id)
-                                   .CamFromImg(image.points2D[el.point2D_idx].xy));
-        }
-        const TriangulationReport result = TriangulateMultiViewChecked(poses, normalized, tri_options);
+        const TriangulationReport result = PositionFromObservations(elements);
         if (!result.success()) continue;
         const bool all_fit = std::all_of(elements.begin(), elements.end(), [&](const TrackElement& el) {
           return ObservationFits(result.point3D_in_world, el);
@@ -242,6 +231,22 @@ void MapperState::MergePointsOfTrack(int track) {
       }
     }
   }
+}
+
+TriangulationReport MapperState::PositionFromObservations(
+    const std::vector<TrackElement>& elements) const {
+  TriangulationOptions tri_options;
+  tri_options.min_tri_angle_deg = 0.0;
+  tri_options.max_angular_error_deg = 90.0;
+  std::vector<Matrix3x4d> poses;
+  std::vector<Eigen::Vector2d> normalized;
+  for (const TrackElement& el : elements) {
+    const Image& image = reconstruction_.GetImage(el.image_id);
+    poses.push_back(image.cam_from_world.ToMatrix());
+    normalized.push_back(reconstruction_.GetCamera(image.camera_id)
+                             .CamFromImg(image.points2D[el.point2D_idx].xy));
+  }
+  return TriangulateMultiViewChecked(poses, normalized, tri_options);
 }
 
 size_t MapperState::TriangulateImage(image_t image_id) {

@@ -17,6 +17,7 @@
 #include <vector>
 
 #include "loopsfm/estimators/bundle_adjustment.h"
+#include "loopsfm/geometry/triangulation.h"
 #include "loopsfm/math/random.h"
 #include "loopsfm/scene/reconstruction.h"
 #include "loopsfm/sfm/incremental_mapper.h"
@@ -136,6 +137,9 @@ class MapperState {
   size_t TriangulateNewPoints(std::vector<TrackElement> elements);
   // Merges points of one track when all their observations fit one position.
   void MergePointsOfTrack(int track);
+  // Multi-view triangulation of these observations with the current poses, with no angle
+  // or error bounds (where the point goes is all that is asked; callers check the fit).
+  TriangulationReport PositionFromObservations(const std::vector<TrackElement>& elements) const;
   bool ObservationFits(const Eigen::Vector3d& xyz, const TrackElement& element) const;
   double MaxAngularErrorRad(camera_t camera_id) const;
 

@@ -8,7 +8,6 @@
 #include "loopsfm/estimators/bundle_adjustment.h"
 #include "loopsfm/estimators/cost_functions/focal_prior.h"
 #include "loopsfm/estimators/reprojection.h"
-#include "loopsfm/geometry/triangulation.h"
 #include "loopsfm/sfm/mapper_state.h"
 #include "loopsfm/util/logging.h"
 #include "loopsfm/util/timer.h"
@@ -341,22 +340,9 @@ std::unordered_set<point3D_t> MapperState::LongestTrackPoints(int per_frame) con
 }
 
 void MapperState::RepositionPoints(const std::vector<point3D_t>& point_ids) {
-  TriangulationOptions tri_options;
-  tri_options.min_tri_angle_deg = 0.0;
-  tri_options.max_angular_error_deg = 90.0;  // where the point goes is all that is asked
-  std::vector<Matrix3x4d> poses;
-  std::vector<Eigen::Vector2d> normalized;
   for (point3D_t id : point_ids) {
     Point3D& point = reconstruction_.GetPoint3D(id);
-    poses.clear();
-    normalized.clear();
-    for (const TrackElement& el : point.track.elements) {
-      const Image& image = reconstruction_.GetImage(el.image_id);
-      poses.push_back(image.cam_from_world.ToMatrix());
-      normalized.push_back(reconstruction_.GetCamera(image.camera_id)
-                               .CamFromImg(image.points2D[el.point2D_idx].xy));
-    }
-    const TriangulationReport result = TriangulateMultiViewChecked(poses, normalized, tri_options);
+    const TriangulationReport result = PositionFromObservations(point.track.elements);
     if (result.success()) point.xyz = result.point3D_in_world;
   }
 }
