@@ -430,10 +430,15 @@ void LoopCloser::Close(MapperState& model, const Sim3d& old_from_recent,
   for (const auto& [id, node] : graph.Nodes()) {
     rec.GetImage(id).cam_from_world = node.ToRigid().Inverse();
   }
+  const PoseGraphReport& solved = graph.report();
+  spdlog::debug("loop: pose graph {} nodes, {} edges, {} iterations, {:.2f} s", solved.num_nodes,
+                solved.num_edges, solved.num_iterations, solved.time_s);
+  Timer timer;
   if (refine_) {
     model.RefineAfterCorrection(report);
   } else {
     model.RetriangulateAll();
+    spdlog::debug("loop: re-triangulation {:.2f} s", timer.ElapsedSeconds());
   }
 }
 

@@ -19,13 +19,16 @@ double ReprojectionError(const PointObservation& obs, const Eigen::Vector3d& xyz
 
 // LO-RANSAC estimator of dst_from_src over point correspondences, residual: the larger of
 // the two reprojection errors (source point moved into the destination frame, destination
-// point moved back into the source frame), in pixels.
+// point moved back into the source frame), in pixels. Where the first is already above
+// `max_error`, the second is not computed: the residual only has to be known to exceed the
+// threshold (RANSAC's score truncates it there), which halves the work on outliers.
 class Sim3AlignmentEstimator {
  public:
   using Model = Sim3d;
   static constexpr int kMinNumSamples = 3;
 
-  explicit Sim3AlignmentEstimator(const std::vector<PointCorrespondence>& data) : data_(data) {}
+  Sim3AlignmentEstimator(const std::vector<PointCorrespondence>& data, double max_error)
+      : data_(data), squared_max_error_(max_error * max_error) {}
   size_t NumData() const { return data_.size(); }
 
   std::vector<Sim3d> Estimate(std::span<const uint32_t> sample) const {
@@ -43,8 +46,10 @@ class Sim3AlignmentEstimator {
     squared_residuals->resize(data_.size());
     for (size_t k = 0; k < data_.size(); ++k) {
       const PointCorrespondence& c = data_[k];
-      const double e = std::max(ReprojectionError(c.dst_obs, dst_from_src * c.src_xyz),
-                                ReprojectionError(c.src_obs, src_from_dst * c.dst_xyz));
+      double e = ReprojectionError(c.dst_obs, dst_from_src * c.src_xyz);
+      if (e * e <= squared_max_error_) {
+        e = std::max(e, ReprojectionError(c.src_obs, src_from_dst * c.dst_xyz));
+      }
       (*squared_residuals)[k] = e >= 1e150 ? std::numeric_limits<double>::max() : e * e;
     }
   }
@@ -65,6 +70,7 @@ class Sim3AlignmentEstimator {
   }
 
   const std::vector<PointCorrespondence>& data_;
+  double squared_max_error_;
 };
 
 }  // namespace
@@ -72,7 +78,7 @@ class Sim3AlignmentEstimator {
 std::vector<char> AlignmentInliers(const std::vector<PointCorrespondence>& correspondences,
                                    const Sim3d& dst_from_src, double max_reproj_error_px) {
   std::vector<double> squared;
-  Sim3AlignmentEstimator(correspondences).Residuals(dst_from_src, &squared);
+  Sim3AlignmentEstimator(correspondences, max_reproj_error_px).Residuals(dst_from_src, &squared);
   std::vector<char> inliers(squared.size());
   for (size_t k = 0; k < squared.size(); ++k) {
     inliers[k] = squared[k] <= max_reproj_error_px * max_reproj_error_px;
@@ -93,7 +99,7 @@ PointAlignment AlignPointSets(const std::vector<PointCorrespondence>& correspond
   RansacOptions ransac;
   ransac.max_error = max_reproj_error_px;
   ransac.max_num_trials = max_num_trials;
-  const Sim3AlignmentEstimator estimator(correspondences);
+  const Sim3AlignmentEstimator estimator(correspondences, max_reproj_error_px);
   auto result = LoRansac(estimator, ransac, random);
   alignment.success = result.success;
   alignment.num_inliers = result.num_inliers;
