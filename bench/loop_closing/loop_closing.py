@@ -78,7 +78,9 @@ def summary(log):
     text = open(log).read()
     map_s = re.search(r'time map\s+([\d.]+) s', text)
     loops = re.findall(r'loop closed\s+(.*)', text)
-    loop_s = sum(float(x) for x in re.findall(r'; ([\d.]+) s$', '\n'.join(loops), re.M))
+    # The closing time of all loops (those found after mapping are corrected together).
+    closing = re.search(r'loop closing\s+detection [\d.]+ s, \d+ closed \(([\d.]+) s\)', text)
+    loop_s = float(closing.group(1)) if closing else 0.0
     models = len(re.findall(r'^model \d+ \(', text, re.M))
     return float(map_s.group(1)) if map_s else float('nan'), loops, loop_s, models
 

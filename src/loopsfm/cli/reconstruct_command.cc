@@ -91,12 +91,15 @@ void PrintSummary(const ReconstructReport& report) {
                        "  alternate poses", found, m.registrations.size());
   }
   for (const ClosedLoop& loop : m.loops_closed) {
+    // Loops found after mapping are corrected together: no time of their own.
+    const std::string seconds = loop.seconds > 0.0 ? fmt::format("{:.1f} s", loop.seconds)
+                                                   : std::string("corrected with the others");
     out += fmt::format("{:<28}{} -> {}: {} of {} point pairs agree, recent end moved {:.3g} "
-                       "({:.2f} % of the path between), {:.2f} deg, scale {:.4f}; {:.1f} s\n",
+                       "({:.2f} % of the path between), {:.2f} deg, scale {:.4f}; {}\n",
                        "  loop closed", loop.recent_frame, loop.old_frame, loop.num_inliers,
                        loop.num_correspondences, loop.correction_translation,
                        100.0 * loop.correction_fraction_of_path, loop.correction_rotation_deg,
-                       loop.correction_scale, loop.seconds);
+                       loop.correction_scale, seconds);
   }
   out += fmt::format("{:<28}{:.1f} s, peak memory {:.0f} MiB\n", "total", report.total_seconds,
                      report.peak_memory_bytes / 1048576.0);

@@ -84,7 +84,8 @@ Reconstruction CloseLoopsAfterMapping(const MapperInput& input, const Reconstruc
   bool corrected = false;
   if (loop.CloseWhileMapping()) {
     LoopCloser closer(input, loop, options.seed + 1, /*refine=*/false);
-    for (image_t id : ordered) corrected |= closer.AfterRegistration(state, id, report);
+    for (image_t id : ordered) closer.AfterRegistration(state, id, report);
+    corrected = closer.CloseGathered(state, report);
   }
   // Split tracks start from a refined map after the pose graph, from the map as triangulated
   // without it; their pass ends with a bundle of its own.
@@ -322,6 +323,15 @@ bool LoopCloser::DetectAndClose(MapperState& model, image_t image_id, MapperRepo
     }
   }
 
+  std::vector<LoopEdge> edges;
+  auto world_from_cam = [&](image_t id) {
+    return Sim3d::FromRigid(rec.GetImage(id).cam_from_world.Inverse());
+  };
+  for (const auto& [old_id, recent_id] : loop_edges) {
+    edges.push_back({old_id, recent_id,
+                     world_from_cam(old_id).Inverse() * old_from_recent * world_from_cam(recent_id)});
+  }
+
   ClosedLoop loop;
   loop.recent_frame = rec.GetImage(image_id).name;
   loop.old_frame = input_.frames[old_index].name;
@@ -332,18 +342,29 @@ bool LoopCloser::DetectAndClose(MapperState& model, image_t image_id, MapperRepo
   loop.correction_rotation_deg = RotationAngleDegrees(old_from_recent.rotation);
   loop.correction_scale = scale;
   loop.num_points_before = static_cast<long long>(rec.NumPoints3D());
-  Timer timer;
-  Close(model, old_from_recent, loop_edges, report);
-  loop.num_points_after = static_cast<long long>(model.reconstruction().NumPoints3D());
-  loop.seconds = timer.ElapsedSeconds();
-  report->seconds_loop_closing += loop.seconds;
-  report->seconds_loop_detection -= loop.seconds;  // counted once, as closing
-  spdlog::info("loop: closed {} -> {} ({} of {} point pairs agree): recent end moved by {:.3g} "
-               "({:.2f} % of the path between), {:.2f} deg, scale {:.4f}; points {} -> {}, {:.1f} s",
-               loop.recent_frame, loop.old_frame, loop.num_inliers, loop.num_correspondences,
+  loop.num_points_after = loop.num_points_before;
+  bool closed = false;
+  if (refine_) {
+    Timer timer;
+    closed = Close(model, edges, report);
+    loop.num_points_after = static_cast<long long>(model.reconstruction().NumPoints3D());
+    loop.seconds = timer.ElapsedSeconds();
+    report->seconds_loop_closing += loop.seconds;
+    report->seconds_loop_detection -= loop.seconds;  // counted once, as closing
+  } else {
+    gathered_.insert(gathered_.end(), edges.begin(), edges.end());
+    gathered_loops_.push_back(report->loops_closed.size());
+  }
+  const std::string outcome =
+      refine_ ? fmt::format("points {} -> {}, {:.1f} s", loop.num_points_before,
+                            loop.num_points_after, loop.seconds)
+              : std::string("corrected with the others at the end");
+  spdlog::info("loop: {} {} -> {} ({} of {} point pairs agree): recent end {} by {:.3g} ({:.2f} % "
+               "of the path between), {:.2f} deg, scale {:.4f}; {}",
+               refine_ ? "closed" : "found", loop.recent_frame, loop.old_frame, loop.num_inliers,
+               loop.num_correspondences, refine_ ? "moved" : "to move",
                loop.correction_translation, 100.0 * loop.correction_fraction_of_path,
-               loop.correction_rotation_deg, loop.correction_scale, loop.num_points_before,
-               loop.num_points_after, loop.seconds);
+               loop.correction_rotation_deg, loop.correction_scale, outcome);
   report->loops_closed.push_back(std::move(loop));
   for (size_t e = 0; e < loop_edges.size(); ++e) {
     report->loop_links.push_back({"posegraph", rec.GetImage(loop_edges[e].first).name,
@@ -351,13 +372,28 @@ bool LoopCloser::DetectAndClose(MapperState& model, image_t image_id, MapperRepo
   }
   window_.clear();
   // While mapping, each closing ends with a global refinement: wait for more of the loop.
-  // After mapping, closing is cheap and each window of the overlap corrects what is left.
+  // After mapping, every window of the overlap adds its edges to the one correction.
   cooldown_ = refine_ ? options_.min_frame_gap / 2 : options_.num_consistent;
-  return true;
+  return closed;
 }
 
-void LoopCloser::Close(MapperState& model, const Sim3d& old_from_recent,
-                       const std::vector<std::pair<image_t, image_t>>& loop_edges,
+bool LoopCloser::CloseGathered(MapperState& model, MapperReport* report) {
+  if (gathered_.empty()) return false;
+  Timer timer;
+  const long long before = static_cast<long long>(model.reconstruction().NumPoints3D());
+  const bool closed = Close(model, gathered_, report);
+  const long long after = static_cast<long long>(model.reconstruction().NumPoints3D());
+  for (size_t k : gathered_loops_) report->loops_closed[k].num_points_after = after;
+  const double seconds = timer.ElapsedSeconds();
+  report->seconds_loop_closing += seconds;
+  spdlog::info("loop: {} loops corrected together ({} edges): points {} -> {}, {:.1f} s",
+               gathered_loops_.size(), gathered_.size(), before, after, seconds);
+  gathered_.clear();
+  gathered_loops_.clear();
+  return closed;
+}
+
+bool LoopCloser::Close(MapperState& model, const std::vector<LoopEdge>& loop_edges,
                        MapperReport* report) {
   Reconstruction& rec = model.reconstruction();
   KeepPathBeforeLoopClosing(input_, rec, report);
@@ -398,10 +434,8 @@ void LoopCloser::Close(MapperState& model, const Sim3d& old_from_recent,
     add_measured_edge(a, b, 0.1);
   }
   const double w = options_.loop_edge_weight;
-  for (const auto& [old_id, recent_id] : loop_edges) {
-    const Sim3d measured =
-        graph.Node(old_id).Inverse() * old_from_recent * graph.Node(recent_id);
-    graph.AddEdge({.node1 = old_id, .node2 = recent_id, .measured = measured,
+  for (const LoopEdge& edge : loop_edges) {
+    graph.AddEdge({.node1 = edge.old_id, .node2 = edge.recent_id, .measured = edge.measured,
                    .rotation_weight = w, .translation_weight = w, .scale_weight = w});
   }
   const image_t gauge = model.GaugeFirst() != kInvalidImageId && graph.HasNode(model.GaugeFirst())
@@ -414,7 +448,7 @@ void LoopCloser::Close(MapperState& model, const Sim3d& old_from_recent,
   if (!graph.Optimize(pg_options)) {
     spdlog::warn("loop: pose graph failed ({}); the model is left as it was",
                  graph.report().termination);
-    return;
+    return false;
   }
 
   // Points move with the observing frame in the middle of their track (capture order).
@@ -440,6 +474,7 @@ void LoopCloser::Close(MapperState& model, const Sim3d& old_from_recent,
     model.RetriangulateAll();
     spdlog::debug("loop: re-triangulation {:.2f} s", timer.ElapsedSeconds());
   }
+  return true;
 }
 
 }  // namespace loopsfm

@@ -71,17 +71,24 @@ void KeepPathBeforeLoopClosing(const MapperInput& input, const Reconstruction& r
 
 class LoopCloser {
  public:
-  // refine: after each correction, a global refinement (bundle, re-triangulation, merging,
-  // filtering) so mapping can go on from it; otherwise only the points of one track that
+  // refine (while mapping): each loop found is corrected at once (pose graph, then a global
+  // refinement) so mapping can go on from a consistent map. Otherwise (after mapping, every
+  // frame already registered) the loops found are gathered and corrected together by
+  // CloseGathered: one pose graph over all their edges, then the points of each track that
   // now agree are merged, and the caller refines once at the end.
   LoopCloser(const MapperInput& input, const LoopClosureOptions& options,
              uint64_t seed = kDefaultRandomSeed, bool refine = true);
 
   // Call after `image_id` was registered (and its local bundle ran). Collects its loop
   // evidence and, when a consistent loop is found, corrects the model (pose graph, global
-  // refinement). Returns true when it did. Draws from its own random numbers, so a mapping
-  // where no loop is closed is the same as one without loop closing.
+  // refinement) or, without refine, gathers it. Returns true when it corrected the model.
+  // Draws from its own random numbers, so a mapping where no loop is closed is the same as
+  // one without loop closing.
   bool AfterRegistration(MapperState& model, image_t image_id, MapperReport* report);
+
+  // Corrects the model for every loop gathered so far, in one pose graph; returns true when
+  // there was one and the pose graph succeeded.
+  bool CloseGathered(MapperState& model, MapperReport* report);
 
   // Its state between registrations (random numbers, evidence window, cooldown), into and
   // from a mapper checkpoint. Restore throws InputError for a state that is not one.
@@ -96,10 +103,19 @@ class LoopCloser {
     std::vector<point3D_t> recent_points, old_points;
   };
 
+  // An edge between the two ends of a loop: the old frame's pose relative to the recent
+  // one's as the loop's similarity says it should be (the pose graph's measurement).
+  struct LoopEdge {
+    image_t old_id = kInvalidImageId;
+    image_t recent_id = kInvalidImageId;
+    Sim3d measured;
+  };
+
   bool DetectAndClose(MapperState& model, image_t image_id, MapperReport* report);
   Evidence CollectEvidence(const MapperState& model, image_t image_id) const;
-  void Close(MapperState& model, const Sim3d& old_from_recent,
-             const std::vector<std::pair<image_t, image_t>>& loop_edges, MapperReport* report);
+  // Pose graph over the registered frames and `loop_edges`, points moved with their frames,
+  // then refined (refine_) or their tracks re-triangulated. False when the graph failed.
+  bool Close(MapperState& model, const std::vector<LoopEdge>& loop_edges, MapperReport* report);
 
   const MapperInput& input_;
   const LoopClosureOptions& options_;
@@ -111,6 +127,10 @@ class LoopCloser {
   std::deque<image_t> window_;
   // Registrations left before another loop may be closed.
   int cooldown_ = 0;
+  // Without refine: the edges of the loops found and not yet corrected, and their entries in
+  // the report's loops_closed.
+  std::vector<LoopEdge> gathered_;
+  std::vector<size_t> gathered_loops_;
 };
 
 }  // namespace loopsfm

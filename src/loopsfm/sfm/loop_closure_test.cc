@@ -59,6 +59,40 @@ TEST(LoopCloser, DriftedWalkBackIsClosedAndItsEndsFused) {
                                     loop.num_inliers);
 }
 
+// After mapping (no refinement per loop), every window of the overlap is gathered and the
+// loops are corrected together, in one pose graph, when asked.
+TEST(LoopCloser, LoopsFoundAfterMappingAreCorrectedTogether) {
+  const MapperProblem p = WalkOutAndBack();
+  const IncrementalMapperOptions options = LoopOptions();
+  MapperState state(p.input, options);
+  RegisterWithDrift(p, state, 0.015);
+  const testing::PoseError before = testing::ComparePoses(state.reconstruction(), p);
+  const size_t points_before = state.reconstruction().NumPoints3D();
+
+  MapperReport report;
+  LoopCloser closer(p.input, options.loop_closure, 5, /*refine=*/false);
+  const size_t n = p.input.frames.size();
+  for (size_t i = n - 10; i < n; ++i) {
+    EXPECT_FALSE(closer.AfterRegistration(state, p.input.frames[i].image_id, &report));
+  }
+  ASSERT_GE(report.loops_closed.size(), 2u);  // windows of 3 in 10 frames
+  // Found, not yet corrected.
+  EXPECT_EQ(testing::ComparePoses(state.reconstruction(), p).max_centre_error,
+            before.max_centre_error);
+
+  EXPECT_TRUE(closer.CloseGathered(state, &report));
+  for (const ClosedLoop& loop : report.loops_closed) {
+    EXPECT_EQ(loop.num_points_after, static_cast<long long>(state.reconstruction().NumPoints3D()));
+  }
+  state.RefineAfterCorrection(&report);  // as CloseLoopsAfterMapping does
+  const testing::PoseError after = testing::ComparePoses(state.reconstruction(), p);
+  EXPECT_EQ(after.num_registered, 80);
+  EXPECT_LT(after.max_centre_error, 0.25 * before.max_centre_error)
+      << "before " << before.max_centre_error << ", after " << after.max_centre_error;
+  EXPECT_LT(state.reconstruction().NumPoints3D(), 0.9 * points_before);
+  EXPECT_FALSE(closer.CloseGathered(state, &report)) << "nothing is left to correct";
+}
+
 TEST(LoopCloser, ConsistentMapHasNoLoopToClose) {
   const MapperProblem p = WalkOutAndBack();
   const IncrementalMapperOptions options = LoopOptions();
