@@ -34,14 +34,28 @@ MapperReport OfferLastFrames(const MapperProblem& p, MapperState& state, int cou
   return report;
 }
 
-TEST(LoopCloser, DriftedWalkBackIsClosedAndItsEndsFused) {
+// The walk out and back registered with drift: 1.5 cm a frame, 0.6 m at the end of the walk
+// back, 30-40 px against the first frames.
+struct DriftedWalk {
   const MapperProblem p = WalkOutAndBack();
   const IncrementalMapperOptions options = LoopOptions();
-  MapperState state(p.input, options);
-  // 1.5 cm a frame: 0.6 m at the end of the walk back, 30-40 px against the first frames.
-  RegisterWithDrift(p, state, 0.015);
-  const testing::PoseError before = testing::ComparePoses(state.reconstruction(), p);
-  const size_t points_before = state.reconstruction().NumPoints3D();
+  MapperState state{p.input, options};
+  testing::PoseError before;
+  size_t points_before = 0;
+  DriftedWalk() {
+    RegisterWithDrift(p, state, 0.015);
+    before = testing::ComparePoses(state.reconstruction(), p);
+    points_before = state.reconstruction().NumPoints3D();
+  }
+};
+
+TEST(LoopCloser, DriftedWalkBackIsClosedAndItsEndsFused) {
+  DriftedWalk walk;
+  const MapperProblem& p = walk.p;
+  const IncrementalMapperOptions& options = walk.options;
+  MapperState& state = walk.state;
+  const testing::PoseError& before = walk.before;
+  const size_t points_before = walk.points_before;
 
   const MapperReport report = OfferLastFrames(p, state, 10);
   ASSERT_EQ(report.loops_closed.size(), 1u);
@@ -62,15 +76,13 @@ TEST(LoopCloser, DriftedWalkBackIsClosedAndItsEndsFused) {
 // After mapping (no refinement per loop), every window of the overlap is gathered and the
 // loops are corrected together, in one pose graph, when asked.
 TEST(LoopCloser, LoopsFoundAfterMappingAreCorrectedTogether) {
-  const MapperProblem p = WalkOutAndBack();
-  const IncrementalMapperOptions options = LoopOptions();
-  MapperState state(p.input, options);
-  RegisterWithDrift(p, state, 0.015);
-  const testing::PoseError before = testing::ComparePoses(state.reconstruction(), p);
-  const size_t points_before = state.reconstruction().NumPoints3D();
+  DriftedWalk walk;
+  const MapperProblem& p = walk.p;
+  MapperState& state = walk.state;
+  const testing::PoseError& before = walk.before;
 
   MapperReport report;
-  LoopCloser closer(p.input, options.loop_closure, 5, /*refine=*/false);
+  LoopCloser closer(p.input, walk.options.loop_closure, 5, /*refine=*/false);
   const size_t n = p.input.frames.size();
   for (size_t i = n - 10; i < n; ++i) {
     EXPECT_FALSE(closer.AfterRegistration(state, p.input.frames[i].image_id, &report));
@@ -89,7 +101,7 @@ TEST(LoopCloser, LoopsFoundAfterMappingAreCorrectedTogether) {
   EXPECT_EQ(after.num_registered, 80);
   EXPECT_LT(after.max_centre_error, 0.25 * before.max_centre_error)
       << "before " << before.max_centre_error << ", after " << after.max_centre_error;
-  EXPECT_LT(state.reconstruction().NumPoints3D(), 0.9 * points_before);
+  EXPECT_LT(state.reconstruction().NumPoints3D(), 0.9 * walk.points_before);
   EXPECT_FALSE(closer.CloseGathered(state, &report)) << "nothing is left to correct";
 }
 
