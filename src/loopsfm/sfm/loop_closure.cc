@@ -346,7 +346,7 @@ bool LoopCloser::DetectAndClose(MapperState& model, image_t image_id, MapperRepo
   bool closed = false;
   if (refine_) {
     Timer timer;
-    closed = Close(model, edges, report);
+    closed = Close(model, edges, options_.loop_edge_weight, report);
     loop.num_points_after = static_cast<long long>(model.reconstruction().NumPoints3D());
     loop.seconds = timer.ElapsedSeconds();
     report->seconds_loop_closing += loop.seconds;
@@ -381,7 +381,11 @@ bool LoopCloser::CloseGathered(MapperState& model, MapperReport* report) {
   if (gathered_.empty()) return false;
   Timer timer;
   const long long before = static_cast<long long>(model.reconstruction().NumPoints3D());
-  const bool closed = Close(model, gathered_, report);
+  // Each loop's edges were measured on its own stretch of the overlap, and no two agree
+  // exactly (drift is no rigid motion); at full weight each, they would pull the old end out
+  // of shape between them. Together they weigh as much as one loop's.
+  const double weight = options_.loop_edge_weight / static_cast<double>(gathered_loops_.size());
+  const bool closed = Close(model, gathered_, weight, report);
   const long long after = static_cast<long long>(model.reconstruction().NumPoints3D());
   for (size_t k : gathered_loops_) report->loops_closed[k].num_points_after = after;
   const double seconds = timer.ElapsedSeconds();
@@ -394,7 +398,7 @@ bool LoopCloser::CloseGathered(MapperState& model, MapperReport* report) {
 }
 
 bool LoopCloser::Close(MapperState& model, const std::vector<LoopEdge>& loop_edges,
-                       MapperReport* report) {
+                       double loop_weight, MapperReport* report) {
   Reconstruction& rec = model.reconstruction();
   KeepPathBeforeLoopClosing(input_, rec, report);
   PoseGraph graph;
@@ -433,7 +437,7 @@ bool LoopCloser::Close(MapperState& model, const std::vector<LoopEdge>& loop_edg
     if (it != shared_points.end() && it->second >= options_.covisibility_min_points) continue;
     add_measured_edge(a, b, 0.1);
   }
-  const double w = options_.loop_edge_weight;
+  const double w = loop_weight;
   for (const LoopEdge& edge : loop_edges) {
     graph.AddEdge({.node1 = edge.old_id, .node2 = edge.recent_id, .measured = edge.measured,
                    .rotation_weight = w, .translation_weight = w, .scale_weight = w});

@@ -113,9 +113,11 @@ class LoopCloser {
 
   bool DetectAndClose(MapperState& model, image_t image_id, MapperReport* report);
   Evidence CollectEvidence(const MapperState& model, image_t image_id) const;
-  // Pose graph over the registered frames and `loop_edges`, points moved with their frames,
-  // then refined (refine_) or their tracks re-triangulated. False when the graph failed.
-  bool Close(MapperState& model, const std::vector<LoopEdge>& loop_edges, MapperReport* report);
+  // Pose graph over the registered frames and `loop_edges` (each of weight `loop_weight`),
+  // points moved with their frames, then refined (refine_) or their tracks re-triangulated.
+  // False when the graph failed.
+  bool Close(MapperState& model, const std::vector<LoopEdge>& loop_edges, double loop_weight,
+             MapperReport* report);
 
   const MapperInput& input_;
   const LoopClosureOptions& options_;
