@@ -78,7 +78,8 @@ struct LoopClosureOptions {
   double max_correction_fraction_of_path = 0.1;
   double max_correction_scale = 1.5;
   // Pose graph: frames sharing this many points are joined by a co-visibility edge; a loop
-  // edge weighs this much more than the others.
+  // edge weighs this much more than the others (after mapping, the loops corrected together
+  // share this weight: each of n loops' edges weighs loop_edge_weight / n).
   int covisibility_min_points = 20;
   double loop_edge_weight = 100.0;
   // Split tracks: weight of a pair's coincidence term against a reprojection error, per
