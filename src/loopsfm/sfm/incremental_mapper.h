@@ -93,6 +93,9 @@ struct LoopClosureOptions {
   // polish_settle_tolerance of the centres' spread per step. 0 points: full bundle only.
   int refine_points_per_frame = 300;
   double polish_settle_tolerance = 1e-4;
+  // Split tracks, in that first bundle: up to this many of each group's tied pairs, each
+  // weighted to pull as hard as the group's share it stands for.
+  int split_refine_ties_per_group = 200;
   void Check() const;
 };
 

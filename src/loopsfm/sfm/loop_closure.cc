@@ -36,6 +36,9 @@ void LoopClosureOptions::Check() const {
   LOOPSFM_REQUIRE_OPTION(polish_settle_tolerance >= 0,
                          "loop: polish_settle_tolerance must be >= 0 (got {})",
                          polish_settle_tolerance);
+  LOOPSFM_REQUIRE_OPTION(split_refine_ties_per_group > 0,
+                         "loop: split_refine_ties_per_group must be positive (got {})",
+                         split_refine_ties_per_group);
 }
 
 MapperInput WithoutLoopPairs(const MapperInput& input, int min_frame_gap) {

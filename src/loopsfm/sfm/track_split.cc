@@ -1,6 +1,7 @@
 #include "loopsfm/sfm/track_split.h"
 
 #include <algorithm>
+#include <cmath>
 #include <map>
 #include <optional>
 #include <unordered_map>
@@ -24,6 +25,7 @@ struct Span {
 struct SplitPair {
   point3D_t old_id = kInvalidPoint3DId, recent_id = kInvalidPoint3DId;
   Span old_span, recent_span;
+  int group = 0;
 };
 
 // Mean depth of a point in the frames observing it.
@@ -119,7 +121,9 @@ int CloseLoopsBySplitTracks(MapperState& model, const LoopClosureOptions& option
     }
     ++report->num_split_groups;
     for (size_t k = 0; k < pairs.size(); ++k) {
-      if (alignment.inlier_mask[k]) tied.push_back(pairs[k]);
+      if (!alignment.inlier_mask[k]) continue;
+      tied.push_back(pairs[k]);
+      tied.back().group = report->num_split_groups;
     }
     spdlog::info("split: {} of {} pairs {} -> {} follow one similarity (moves the recent end "
                  "{:.3g}, {:.2f} % of the path between, scale {:.4f})",
@@ -141,35 +145,58 @@ int CloseLoopsBySplitTracks(MapperState& model, const LoopClosureOptions& option
   }
   KeepPathBeforeLoopClosing(input, rec, report);
   const size_t points_before = rec.NumPoints3D();
-  const auto tie_pairs = [&](BundleAdjuster& adjuster) {
-    for (const SplitPair& pair : tied) {
-      const Point3D& old = rec.GetPoint3D(pair.old_id);
-      const Point3D& recent = rec.GetPoint3D(pair.recent_id);
-      const double depth = 0.5 * (MeanDepth(rec, old) + MeanDepth(rec, recent));
-      const double focal = rec.GetCamera(rec.GetImage(old.track.elements[0].image_id).camera_id)
-                               .MeanFocalLength();
-      if (!(depth > 0.0)) continue;
-      adjuster.problem().AddResidualBlock(
-          PointCoincidenceCost::Create(options.split_weight * focal / depth), nullptr,
-          adjuster.PointBlock(pair.old_id), adjuster.PointBlock(pair.recent_id));
-    }
+  // A pair's tie, its weight times `scale`.
+  const auto tie = [&](BundleAdjuster& adjuster, const SplitPair& pair, double scale) {
+    const Point3D& old = rec.GetPoint3D(pair.old_id);
+    const Point3D& recent = rec.GetPoint3D(pair.recent_id);
+    const double depth = 0.5 * (MeanDepth(rec, old) + MeanDepth(rec, recent));
+    const double focal = rec.GetCamera(rec.GetImage(old.track.elements[0].image_id).camera_id)
+                             .MeanFocalLength();
+    if (!(depth > 0.0)) return;
+    adjuster.problem().AddResidualBlock(
+        PointCoincidenceCost::Create(scale * options.split_weight * focal / depth), nullptr,
+        adjuster.PointBlock(pair.old_id), adjuster.PointBlock(pair.recent_id));
   };
-  // As after a pose-graph correction, the cameras start far from where the ties take them:
-  // a bundle over the longest tracks and the tied points moves them first.
-  std::optional<double> polish;
-  if (options.refine_points_per_frame > 0) {
-    std::vector<point3D_t> tied_points;
-    for (const SplitPair& pair : tied) {
-      tied_points.push_back(pair.old_id);
-      tied_points.push_back(pair.recent_id);
+  if (options.refine_points_per_frame == 0) {
+    // Every tie in a full bundle; the points the ties brought together then merge.
+    model.GlobalBundle(report, {.add_terms = [&](BundleAdjuster& adjuster) {
+                                  for (const SplitPair& pair : tied) tie(adjuster, pair, 1.0);
+                                }});
+    model.RetriangulateAll();
+    model.FilterPoints({});
+    model.GlobalBundle(report);
+  } else {
+    // As after a pose-graph correction, the cameras start far from where the ties take them:
+    // a bundle over the longest tracks moves them first. A tied point is not eliminated with
+    // the others in the Schur complement (its tie links it to another point), so thousands of
+    // ties make that bundle's camera system large; a sample of each group, weighted to pull
+    // as hard as the whole group, moves the cameras as far.
+    std::map<int, std::vector<const SplitPair*>> by_group;
+    for (const SplitPair& pair : tied) by_group[pair.group].push_back(&pair);
+    std::vector<std::pair<const SplitPair*, double>> sample;  // (pair, weight scale)
+    std::vector<point3D_t> sample_points;
+    for (const auto& [group, pairs] : by_group) {
+      const size_t take = std::min<size_t>(options.split_refine_ties_per_group, pairs.size());
+      const double scale = std::sqrt(static_cast<double>(pairs.size()) / take);
+      for (size_t k = 0; k < take; ++k) {
+        const SplitPair* pair = pairs[k * pairs.size() / take];
+        sample.push_back({pair, scale});
+        sample_points.push_back(pair->old_id);
+        sample_points.push_back(pair->recent_id);
+      }
     }
-    model.SubsetBundle(report, options.refine_points_per_frame, tie_pairs, tied_points);
-    polish = options.polish_settle_tolerance;
+    model.SubsetBundle(
+        report, options.refine_points_per_frame,
+        [&](BundleAdjuster& adjuster) {
+          for (const auto& [pair, scale] : sample) tie(adjuster, *pair, scale);
+        },
+        sample_points);
+    // The tied points now agree and merge into one point each: from here on the fused
+    // tracks hold the two ends together, and the full bundle polishes without ties.
+    model.RetriangulateAll();
+    model.FilterPoints({});
+    model.GlobalBundle(report, {.settle_tolerance = options.polish_settle_tolerance});
   }
-  model.GlobalBundle(report, {.add_terms = tie_pairs, .settle_tolerance = polish});
-  model.RetriangulateAll();
-  model.FilterPoints({});
-  model.GlobalBundle(report);
   model.FilterPoints({});
   const double seconds = timer.ElapsedSeconds();
   report->seconds_split += seconds;

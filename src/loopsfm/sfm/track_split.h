@@ -22,9 +22,14 @@
 // where depth is the mean distance of the two points from the frames observing them. The
 // term is in pixels of the pair's separation as its observers see it, so its weight does not
 // depend on the model's arbitrary scale and stays comparable to the reprojection errors; a
-// few hundred pairs outweigh nothing locally yet move the frames between the ends. Then the
-// tracks are re-triangulated (the two points of each pair now agree and merge), filtered,
-// and bundled once more without the terms.
+// few hundred pairs outweigh nothing locally yet move the frames between the ends. That
+// bundle runs over the longest tracks only (refine_points_per_frame, as after a pose-graph
+// correction) with up to split_refine_ties_per_group pairs of each group, weighted to pull as
+// hard as the whole group: a tied point cannot be eliminated in the Schur complement, so
+// thousands of ties would make its camera system large. Then the tracks are re-triangulated
+// (the two points of each pair now agree and merge), filtered, and bundled in full without
+// the terms. With refine_points_per_frame 0 the terms of every pair enter one full bundle
+// before that.
 
 #include "loopsfm/math/random.h"
 #include "loopsfm/sfm/incremental_mapper.h"
