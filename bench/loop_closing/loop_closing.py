@@ -1,16 +1,18 @@
 #!/usr/bin/env python3
-"""Loop closing on one database: `--loop-closing none` against `posegraph`, side by side.
+"""Loop closing on one database: `--loop-closing none` against the other methods, side by side.
 
 For each set the first run builds the database (frames, features, pairs); the other method
-maps a copy of it, so both see the same matches. Intrinsics may be made wrong on purpose
+maps a copy of it, so all see the same matches. Intrinsics may be made wrong on purpose
 (--focal-factor 1.04: focal 4 % too long, held fixed), which makes drift. Prints registered
 frames, models, ATE (% of path), rotation error, loop gap (mean / max, ground-truth units),
 map time (for COLMAP: its mapper's wall time), the loops closed and their time, and writes a
-top view per set (OUT/<set>_top.png: ground truth, posegraph with its loop links, none).
+top view per set and method (OUT/<set>_top.png for posegraph, OUT/<set>_top_<method>.png for the
+others: ground truth, the method's path with its loop links, none). Closing time is the pose
+graph's and the split tracks' together.
 
   bench/loop_closing/loop_closing.py --set NAME INPUT GROUNDTRUTH INTRINSICS \\
-      [--set ...] [--focal-factor F] [--withhold] [--out DIR] [--loopsfm build/loopsfm]
-      [--colmap [BINARY]]
+      [--set ...] [--focal-factor F] [--withhold] [--methods none,posegraph[,split,both]]
+      [--out DIR] [--loopsfm build/loopsfm] [--colmap [BINARY]]
 
 --withhold maps without the pairs 50+ frames apart and adds them at the end
 (`reconstruct --withhold-loop-pairs`), so drift grows unchecked until the loops are closed.
@@ -81,6 +83,8 @@ def summary(log):
     # The closing time of all loops (those found after mapping are corrected together).
     closing = re.search(r'loop closing\s+detection [\d.]+ s, \d+ closed \(([\d.]+) s\)', text)
     loop_s = float(closing.group(1)) if closing else 0.0
+    split = re.search(r'split tracks\s+\d+ pairs tied.*, ([\d.]+) s$', text, re.M)
+    loop_s += float(split.group(1)) if split else 0.0
     models = len(re.findall(r'^model \d+ \(', text, re.M))
     return float(map_s.group(1)) if map_s else float('nan'), loops, loop_s, models
 
@@ -120,11 +124,19 @@ def main():
     parser.add_argument('--focal-factor', type=float, default=1.0)
     parser.add_argument('--withhold', action='store_true',
                         help='withhold the loop pairs until the end of mapping')
+    parser.add_argument('--methods', default='none,posegraph',
+                        help='loop-closing methods to map with, comma-separated; none comes '
+                             'first (it builds the database the others copy)')
     parser.add_argument('--out', default='loop_closing_out')
     parser.add_argument('--loopsfm', default='build/loopsfm')
     parser.add_argument('--colmap', nargs='?', const='colmap', default=None, metavar='BINARY',
                         help="also run COLMAP 3.8's mapper on the same database")
     args = parser.parse_args()
+    methods = ['none'] + [m for m in args.methods.split(',') if m and m != 'none']
+    for m in methods:
+        if m not in ('none', 'posegraph', 'split', 'both'):
+            parser.error(f'--methods: unknown loop-closing method {m!r} '
+                         '(none, posegraph, split, both)')
     os.makedirs(args.out, exist_ok=True)
     rows = []
     for name, media, gt, intrinsics in args.set:
@@ -132,7 +144,7 @@ def main():
         intr = base + '.intrinsics.txt'
         params = scaled_intrinsics(intrinsics, intr, args.focal_factor)
         outputs = {}
-        for method in ('none', 'posegraph'):
+        for method in methods:
             out = f'{base}_{method}'
             if method != 'none':
                 shutil.rmtree(out, ignore_errors=True)
@@ -162,11 +174,13 @@ def main():
                          100 * (m['ate_fraction_of_path'] or float('nan')),
                          m['rotation_error_mean_deg'], gaps.get('mean'), gaps.get('max'),
                          seconds, None, None))
-        subprocess.check_call([args.loopsfm, 'eval', os.path.join(outputs['posegraph'], 'sparse', '0'),
-                               gt, '--plot', base + '_top.png', '--plot-also',
-                               os.path.join(outputs['none'], 'sparse', '0'), '--plot-links',
-                               os.path.join(outputs['posegraph'], 'loop_links.txt')],
-                              stdout=subprocess.DEVNULL)
+        for method in methods[1:]:
+            suffix = '' if method == 'posegraph' else '_' + method
+            subprocess.check_call([args.loopsfm, 'eval', os.path.join(outputs[method], 'sparse', '0'),
+                                   gt, '--plot', f'{base}_top{suffix}.png', '--plot-also',
+                                   os.path.join(outputs['none'], 'sparse', '0'), '--plot-links',
+                                   os.path.join(outputs[method], 'loop_links.txt')],
+                                  stdout=subprocess.DEVNULL)
     print(f'focal factor {args.focal_factor}, loop pairs {"withheld until the end" if args.withhold else "used while mapping"}')
     print('| set | loop closing | frames | models | ATE % path | rot. err deg | loop gap mean | '
           'loop gap max | map s | loops closed | closing s |')
