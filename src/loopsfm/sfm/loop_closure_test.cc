@@ -234,6 +234,11 @@ TEST(LoopCloser, OptionsAreChecked) {
   options = {};
   options.max_correction_scale = 0.9;
   EXPECT_THROW(options.Check(), InvalidArgument);
+  options = {};
+  options.split_refine_ties_per_group = 0;
+  EXPECT_THROW(options.Check(), InvalidArgument);
+  options = {};
+  EXPECT_NO_THROW(options.Check());
 }
 
 }  // namespace
