@@ -25,7 +25,6 @@ struct Span {
 struct SplitPair {
   point3D_t old_id = kInvalidPoint3DId, recent_id = kInvalidPoint3DId;
   Span old_span, recent_span;
-  int group = 0;
 };
 
 // Mean depth of a point in the frames observing it.
@@ -74,6 +73,9 @@ int CloseLoopsBySplitTracks(MapperState& model, const LoopClosureOptions& option
   }
 
   std::vector<SplitPair> tied;
+  // Up to split_refine_ties_per_group pairs of each group for the first bundle, each weighted
+  // to pull as hard as the group's share it stands for: (index in `tied`, weight scale).
+  std::vector<std::pair<size_t, double>> sample;
   for (const auto& [key, pairs] : groups) {
     if (static_cast<int>(pairs.size()) < options.min_num_inliers) continue;
     std::vector<PointCorrespondence> correspondences;
@@ -120,11 +122,14 @@ int CloseLoopsBySplitTracks(MapperState& model, const LoopClosureOptions& option
       continue;
     }
     ++report->num_split_groups;
+    const size_t first = tied.size();
     for (size_t k = 0; k < pairs.size(); ++k) {
-      if (!alignment.inlier_mask[k]) continue;
-      tied.push_back(pairs[k]);
-      tied.back().group = report->num_split_groups;
+      if (alignment.inlier_mask[k]) tied.push_back(pairs[k]);
     }
+    const size_t num_tied = tied.size() - first;
+    const size_t take = std::min<size_t>(options.split_refine_ties_per_group, num_tied);
+    const double scale = std::sqrt(static_cast<double>(num_tied) / take);
+    for (size_t k = 0; k < take; ++k) sample.push_back({first + k * num_tied / take, scale});
     spdlog::info("split: {} of {} pairs {} -> {} follow one similarity (moves the recent end "
                  "{:.3g}, {:.2f} % of the path between, scale {:.4f})",
                  alignment.num_inliers, pairs.size(), input.frames[recent_index].name,
@@ -157,46 +162,35 @@ int CloseLoopsBySplitTracks(MapperState& model, const LoopClosureOptions& option
         PointCoincidenceCost::Create(scale * options.split_weight * focal / depth), nullptr,
         adjuster.PointBlock(pair.old_id), adjuster.PointBlock(pair.recent_id));
   };
-  if (options.refine_points_per_frame == 0) {
-    // Every tie in a full bundle; the points the ties brought together then merge.
-    model.GlobalBundle(report, {.add_terms = [&](BundleAdjuster& adjuster) {
-                                  for (const SplitPair& pair : tied) tie(adjuster, pair, 1.0);
-                                }});
-    model.RetriangulateAll();
-    model.FilterPoints({});
-    model.GlobalBundle(report);
-  } else {
-    // As after a pose-graph correction, the cameras start far from where the ties take them:
-    // a bundle over the longest tracks moves them first. A tied point is not eliminated with
-    // the others in the Schur complement (its tie links it to another point), so thousands of
-    // ties make that bundle's camera system large; a sample of each group, weighted to pull
-    // as hard as the whole group, moves the cameras as far.
-    std::map<int, std::vector<const SplitPair*>> by_group;
-    for (const SplitPair& pair : tied) by_group[pair.group].push_back(&pair);
-    std::vector<std::pair<const SplitPair*, double>> sample;  // (pair, weight scale)
+  // As after a pose-graph correction, the cameras start far from where the ties take them:
+  // a bundle over the longest tracks moves them first. A tied point is not eliminated with
+  // the others in the Schur complement (its tie links it to another point), so thousands of
+  // ties make that bundle's camera system large; the sample moves the cameras as far.
+  // Without that bundle (refine_points_per_frame 0), every tie enters one full bundle.
+  std::optional<double> polish;
+  if (options.refine_points_per_frame > 0) {
     std::vector<point3D_t> sample_points;
-    for (const auto& [group, pairs] : by_group) {
-      const size_t take = std::min<size_t>(options.split_refine_ties_per_group, pairs.size());
-      const double scale = std::sqrt(static_cast<double>(pairs.size()) / take);
-      for (size_t k = 0; k < take; ++k) {
-        const SplitPair* pair = pairs[k * pairs.size() / take];
-        sample.push_back({pair, scale});
-        sample_points.push_back(pair->old_id);
-        sample_points.push_back(pair->recent_id);
-      }
+    for (const auto& [k, scale] : sample) {
+      sample_points.push_back(tied[k].old_id);
+      sample_points.push_back(tied[k].recent_id);
     }
     model.SubsetBundle(
         report, options.refine_points_per_frame,
         [&](BundleAdjuster& adjuster) {
-          for (const auto& [pair, scale] : sample) tie(adjuster, *pair, scale);
+          for (const auto& [k, scale] : sample) tie(adjuster, tied[k], scale);
         },
         sample_points);
-    // The tied points now agree and merge into one point each: from here on the fused
-    // tracks hold the two ends together, and the full bundle polishes without ties.
-    model.RetriangulateAll();
-    model.FilterPoints({});
-    model.GlobalBundle(report, {.settle_tolerance = options.polish_settle_tolerance});
+    polish = options.polish_settle_tolerance;
+  } else {
+    model.GlobalBundle(report, {.add_terms = [&](BundleAdjuster& adjuster) {
+                                  for (const SplitPair& pair : tied) tie(adjuster, pair, 1.0);
+                                }});
   }
+  // The tied points now agree and merge into one point each: from here on the fused tracks
+  // hold the two ends together, and the full bundle polishes without ties.
+  model.RetriangulateAll();
+  model.FilterPoints({});
+  model.GlobalBundle(report, {.settle_tolerance = polish});
   model.FilterPoints({});
   const double seconds = timer.ElapsedSeconds();
   report->seconds_split += seconds;
