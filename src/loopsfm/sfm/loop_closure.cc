@@ -474,13 +474,14 @@ bool LoopCloser::Close(MapperState& model, const std::vector<LoopEdge>& loop_edg
   const PoseGraphReport& solved = graph.report();
   spdlog::debug("loop: pose graph {} nodes, {} edges, {} iterations, {:.2f} s", solved.num_nodes,
                 solved.num_edges, solved.num_iterations, solved.time_s);
+  // The ends' points that agree now merge before any bundle runs: unmerged, nothing in the
+  // bundle holds the ends together, and it would relax a large correction back towards the
+  // drifted path.
   Timer timer;
-  if (refine_) {
-    model.RefineAfterCorrection(report);
-  } else {
-    model.RetriangulateAll();
-    spdlog::debug("loop: re-triangulation {:.2f} s", timer.ElapsedSeconds());
-  }
+  model.RetriangulateAll();
+  spdlog::debug("loop: re-triangulation {:.2f} s, points {} after it", timer.ElapsedSeconds(),
+                rec.NumPoints3D());
+  if (refine_) model.RefineAfterCorrection(report);
   return true;
 }
 

@@ -73,6 +73,27 @@ TEST(LoopCloser, DriftedWalkBackIsClosedAndItsEndsFused) {
                                     loop.num_inliers);
 }
 
+// Drift with a turn and a change of scale (a focal length a few percent off does this over a
+// lap, as on drift2): the pose graph's correction turns and scales the walk back, and the
+// ends' points are fused.
+TEST(LoopCloser, TurnedAndScaledWalkBackIsClosedAndItsEndsFused) {
+  const MapperProblem p = WalkOutAndBack();
+  const IncrementalMapperOptions options = LoopOptions();
+  MapperState state(p.input, options);
+  RegisterWithDrift(p, state, 0.005, 0.15, 0.004);
+  const testing::PoseError before = testing::ComparePoses(state.reconstruction(), p);
+  const size_t points_before = state.reconstruction().NumPoints3D();
+
+  const MapperReport report = OfferLastFrames(p, state, 10);
+  ASSERT_EQ(report.loops_closed.size(), 1u);
+  EXPECT_GT(report.loops_closed[0].correction_rotation_deg, 3.0);
+  const testing::PoseError after = testing::ComparePoses(state.reconstruction(), p);
+  EXPECT_EQ(after.num_registered, 80);
+  EXPECT_LT(after.max_centre_error, 0.25 * before.max_centre_error)
+      << "before " << before.max_centre_error << ", after " << after.max_centre_error;
+  EXPECT_LT(state.reconstruction().NumPoints3D(), 0.9 * points_before);
+}
+
 // After mapping (no refinement per loop), every window of the overlap is gathered and the
 // loops are corrected together, in one pose graph, when asked.
 TEST(LoopCloser, LoopsFoundAfterMappingAreCorrectedTogether) {

@@ -27,13 +27,24 @@ inline MapperProblem WalkOutAndBack() {
 // sideways and outwards by drift that grows with each frame (`drift_per_frame` metres), as
 // an incremental mapper would have placed them; each frame's tracks are triangulated as it
 // comes, so where the walk back meets the first frames' points it makes points of its own.
-inline void RegisterWithDrift(const MapperProblem& p, MapperState& state, double drift_per_frame) {
+// With `degrees_per_frame` and `scale_per_frame` the walk back also turns and shrinks or grows
+// about the turning frame (a focal length that is off does this): drift as a similarity.
+inline void RegisterWithDrift(const MapperProblem& p, MapperState& state, double drift_per_frame,
+                              double degrees_per_frame = 0.0, double scale_per_frame = 0.0) {
   const int half = static_cast<int>(p.input.frames.size()) / 2;
+  const Eigen::Vector3d pivot = p.cam_from_world[half - 1].Inverse().translation;
   for (size_t i = 0; i < p.input.frames.size(); ++i) {
     const image_t id = p.input.frames[i].image_id;
     Rigid3d pose = p.cam_from_world[i];
-    const double drift = drift_per_frame * std::max(0, static_cast<int>(i) - half + 1);
+    const int steps = std::max(0, static_cast<int>(i) - half + 1);
+    const double drift = drift_per_frame * steps;
     pose.translation -= pose.rotation * Eigen::Vector3d(0.3 * drift, drift, 0.5 * drift);
+    const Eigen::Quaterniond turn(
+        Eigen::AngleAxisd(degrees_per_frame * steps * M_PI / 180.0, Eigen::Vector3d::UnitY()));
+    const Eigen::Vector3d centre = pose.Inverse().translation;
+    const Eigen::Vector3d moved = pivot + (1.0 + scale_per_frame * steps) * (turn * (centre - pivot));
+    pose.rotation = (pose.rotation * turn.inverse()).normalized();
+    pose.translation = -(pose.rotation * moved);
     state.reconstruction().GetImage(id).cam_from_world = pose;
     state.reconstruction().RegisterImage(id);
     state.TriangulateImage(id);
