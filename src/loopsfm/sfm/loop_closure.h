@@ -111,13 +111,19 @@ class LoopCloser {
     Sim3d measured;
   };
 
+  // Two points of one track, at the old end and at the recent end of a loop.
+  struct PointPair {
+    point3D_t old_id = kInvalidPoint3DId;
+    point3D_t recent_id = kInvalidPoint3DId;
+  };
+
   bool DetectAndClose(MapperState& model, image_t image_id, MapperReport* report);
   Evidence CollectEvidence(const MapperState& model, image_t image_id) const;
   // Pose graph over the registered frames and `loop_edges` (each of weight `loop_weight`),
-  // points moved with their frames, then refined (refine_) or their tracks re-triangulated.
-  // False when the graph failed.
+  // points moved with their frames, the pairs in `fuse` fused, then the tracks
+  // re-triangulated and, with refine_, the model refined. False when the graph failed.
   bool Close(MapperState& model, const std::vector<LoopEdge>& loop_edges, double loop_weight,
-             MapperReport* report);
+             const std::vector<PointPair>& fuse, MapperReport* report);
 
   const MapperInput& input_;
   const LoopClosureOptions& options_;

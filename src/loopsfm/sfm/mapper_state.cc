@@ -233,6 +233,17 @@ void MapperState::MergePointsOfTrack(int track) {
   }
 }
 
+point3D_t MapperState::FusePoints(point3D_t id1, point3D_t id2) {
+  if (id1 == id2 || TrackOfPoint(id1) < 0 || TrackOfPoint(id1) != TrackOfPoint(id2)) {
+    return kInvalidPoint3DId;
+  }
+  const point3D_t id = reconstruction_.MergePoints3D(id1, id2);
+  Point3D& point = reconstruction_.GetPoint3D(id);
+  const TriangulationReport result = PositionFromObservations(point.track.elements);
+  if (result.success()) point.xyz = result.point3D_in_world;
+  return id;
+}
+
 TriangulationReport MapperState::PositionFromObservations(
     const std::vector<TrackElement>& elements) const {
   TriangulationOptions tri_options;

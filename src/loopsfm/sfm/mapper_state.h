@@ -59,6 +59,10 @@ class MapperState {
   size_t TriangulateImage(image_t image_id);
   // Same over all tracks (after a global bundle adjustment).
   size_t RetriangulateAll();
+  // One point from two points of the same track, placed where their observations meet best
+  // even where some do not fit yet (a bundle and FilterPoints are to follow). Returns the new
+  // point's id, or kInvalidPoint3DId (nothing changed) when the two are not of one track.
+  point3D_t FusePoints(point3D_t id1, point3D_t id2);
   // Deletes observations with a large reprojection error or behind the camera, then points
   // with a small triangulation angle. Over the given points, or all when empty.
   size_t FilterPoints(const std::vector<point3D_t>& point_ids);

@@ -80,6 +80,42 @@ TEST(MapperState, ObservationsThatDoNotFitStartAnotherPointOfTheirTrack) {
   EXPECT_LT(TracksWithSeveralPoints(state), split / 50 + 1);
 }
 
+// A loop's point pairs are fused whether or not all observations fit yet: one point per
+// pair with every observation of both, placed between them; points of two tracks are not.
+TEST(MapperState, FusesTwoPointsOfOneTrackOnly) {
+  const MapperProblem p = MakeMapperProblem(SmallProblem());
+  IncrementalMapperOptions options;
+  MapperState state(p.input, options);
+  RegisterAtTruth(p, state, 0, 8, 4, Eigen::Vector3d(0.5, 0, 0));
+  std::vector<point3D_t> pair, others;
+  for (size_t t = 0; t < p.input.tracks.size() && pair.empty(); ++t) {
+    const std::vector<point3D_t> points = state.PointsOfTrack(static_cast<int>(t));
+    if (points.size() == 2) pair = points;
+  }
+  ASSERT_EQ(pair.size(), 2u);
+  for (size_t t = 0; t < p.input.tracks.size() && others.size() < 2; ++t) {
+    const std::vector<point3D_t> points = state.PointsOfTrack(static_cast<int>(t));
+    if (points.size() == 1 && points[0] != pair[0] && points[0] != pair[1]) {
+      others.push_back(points[0]);
+    }
+  }
+  ASSERT_EQ(others.size(), 2u);
+  const Reconstruction& rec = state.reconstruction();
+  const size_t points_before = rec.NumPoints3D();
+  EXPECT_EQ(state.FusePoints(others[0], others[1]), kInvalidPoint3DId);
+  EXPECT_EQ(state.FusePoints(pair[0], pair[0]), kInvalidPoint3DId);
+  EXPECT_EQ(rec.NumPoints3D(), points_before);
+
+  const size_t observations = rec.GetPoint3D(pair[0]).track.Length() +
+                              rec.GetPoint3D(pair[1]).track.Length();
+  const int track = state.TrackOfPoint(pair[0]);
+  const point3D_t fused = state.FusePoints(pair[0], pair[1]);
+  ASSERT_NE(fused, kInvalidPoint3DId);
+  EXPECT_EQ(rec.NumPoints3D(), points_before - 1);
+  EXPECT_EQ(rec.GetPoint3D(fused).track.Length(), observations);
+  EXPECT_EQ(state.PointsOfTrack(track), std::vector<point3D_t>{fused});
+}
+
 TEST(MapperState, CountsVisibleTracksOncePerTrack) {
   const MapperProblem p = MakeMapperProblem(SmallProblem());
   IncrementalMapperOptions options;
