@@ -814,8 +814,6 @@ INSTANTIATE_TEST_SUITE_P(Models, ReprojectionCostTest, ::testing::ValuesIn(kCame
 TEST(CostFunctions, DistanceAndRelativePoseJacobiansMatchFiniteDifferences) {
   std::unique_ptr<ceres::CostFunction> distance(PointDistanceCost::Create(1.5, 2.0));
   ExpectJacobiansMatchFiniteDifferences(*distance, {{0.1, 0.2, 0.3}, {1.0, -0.5, 0.8}});
-  std::unique_ptr<ceres::CostFunction> coincidence(PointCoincidenceCost::Create(3.0));
-  ExpectJacobiansMatchFiniteDifferences(*coincidence, {{0.1, 0.2, 0.3}, {1.0, -0.5, 0.8}});
 
   Random random(29);
   const Rigid3d measured(SmallRotation(random, 30.0), Eigen::Vector3d(1.0, 0.2, -0.3));
@@ -837,6 +835,49 @@ TEST(CostFunctions, DistanceAndRelativePoseJacobiansMatchFiniteDifferences) {
   Eigen::Matrix<double, 6, 1> residuals;
   ASSERT_TRUE(relative->Evaluate(parameters, residuals.data(), nullptr));
   EXPECT_LT(residuals.norm(), 1e-12);
+}
+
+// The split-track tie: the separation in pixels as the observer sees it, unchanged by a
+// similarity of the whole model (a tie in world units shrinks with the model, and a bundle
+// held by a gauge at two frames then lowers it by tearing those frames off).
+TEST(CostFunctions, DepthScaledCoincidenceIsInPixelsAndFreeOfTheModelsScale) {
+  Random random(31);
+  const Rigid3d cam_from_world(SmallRotation(random, 30.0), Eigen::Vector3d(0.2, -0.1, 0.4));
+  const Eigen::Vector3d a(0.3, 0.1, 4.0), b(0.35, 0.05, 4.2);
+  std::unique_ptr<ceres::CostFunction> cost(DepthScaledCoincidenceCost::Create(500.0));
+  const auto residuals_at = [&](const Rigid3d& pose, const Eigen::Vector3d& pa,
+                                const Eigen::Vector3d& pb) {
+    const Eigen::Vector4d q = pose.rotation.coeffs();
+    const double* parameters[] = {pa.data(), pb.data(), q.data(), pose.translation.data()};
+    Eigen::Vector3d residuals;
+    EXPECT_TRUE(cost->Evaluate(parameters, residuals.data(), nullptr));
+    return residuals;
+  };
+  const Eigen::Vector3d residuals = residuals_at(cam_from_world, a, b);
+  const double depth = (cam_from_world * (0.5 * (a + b))).z();
+  EXPECT_LT((residuals - 500.0 * (a - b) / depth).norm(), 1e-12);
+
+  // X' = s Q X + d; cam_from_world' = (R Q^T, s t - R Q^T d) sees X' at s times p.
+  const double s = 3.7;
+  const Eigen::Quaterniond q = SmallRotation(random, 50.0);
+  const Eigen::Vector3d d(5.0, -2.0, 1.0);
+  const Eigen::Quaterniond rotation = (cam_from_world.rotation * q.conjugate()).normalized();
+  const Rigid3d moved(rotation, s * cam_from_world.translation - (rotation * d));
+  const Eigen::Vector3d moved_residuals = residuals_at(moved, s * (q * a) + d, s * (q * b) + d);
+  EXPECT_NEAR(moved_residuals.norm(), residuals.norm(), 1e-9 * residuals.norm());
+  EXPECT_GT(residuals.norm(), 1.0);
+
+  ExpectJacobiansMatchFiniteDifferences(
+      *cost, {ToVector(a), ToVector(b), ToVector(cam_from_world.rotation.coeffs()),
+              ToVector(cam_from_world.translation)});
+
+  // Behind the observer the term is not finite: the solver must reject such a step.
+  const Eigen::Vector3d behind_a = -a, behind_b = -b;
+  const Eigen::Vector4d coefficients = Eigen::Quaterniond::Identity().coeffs();
+  const Eigen::Vector3d zero = Eigen::Vector3d::Zero();
+  const double* parameters[] = {behind_a.data(), behind_b.data(), coefficients.data(), zero.data()};
+  Eigen::Vector3d unused;
+  EXPECT_FALSE(cost->Evaluate(parameters, unused.data(), nullptr));
 }
 
 }  // namespace

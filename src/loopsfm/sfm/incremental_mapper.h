@@ -83,7 +83,7 @@ struct LoopClosureOptions {
   int covisibility_min_points = 20;
   double loop_edge_weight = 100.0;
   // Split tracks: weight of a pair's coincidence term against a reprojection error, per
-  // pixel of the pair's separation seen from its observers (distance / depth * focal).
+  // pixel of the pair's separation seen from an observer (distance / depth * focal).
   double split_weight = 10.0;
   // Refinement after a pose-graph correction, whose cameras start far from the bundle's
   // optimum (the first step's cost is about 30x the final one): a bundle over the longest

@@ -27,15 +27,6 @@ struct SplitPair {
   Span old_span, recent_span;
 };
 
-// Mean depth of a point in the frames observing it.
-double MeanDepth(const Reconstruction& rec, const Point3D& point) {
-  double sum = 0.0;
-  for (const TrackElement& el : point.track.elements) {
-    sum += (rec.GetImage(el.image_id).cam_from_world * point.xyz).z();
-  }
-  return sum / point.track.elements.size();
-}
-
 }  // namespace
 
 int CloseLoopsBySplitTracks(MapperState& model, const LoopClosureOptions& options, Random& random,
@@ -150,17 +141,21 @@ int CloseLoopsBySplitTracks(MapperState& model, const LoopClosureOptions& option
   }
   KeepPathBeforeLoopClosing(input, rec, report);
   const size_t points_before = rec.NumPoints3D();
-  // A pair's tie, its weight times `scale`.
+  // A pair's tie, its weight times `scale`: the two points' separation as the old point's
+  // median observer sees it (in pixels, about), so that the ties cannot pull the model's
+  // scale down (a tie in world units gets cheaper as the model shrinks; with the gauge held
+  // at the first frames, a bundle then tore those off and shrank the rest).
   const auto tie = [&](BundleAdjuster& adjuster, const SplitPair& pair, double scale) {
     const Point3D& old = rec.GetPoint3D(pair.old_id);
     const Point3D& recent = rec.GetPoint3D(pair.recent_id);
-    const double depth = 0.5 * (MeanDepth(rec, old) + MeanDepth(rec, recent));
-    const double focal = rec.GetCamera(rec.GetImage(old.track.elements[0].image_id).camera_id)
-                             .MeanFocalLength();
-    if (!(depth > 0.0)) return;
+    const image_t observer_id = input.frames[pair.old_span.median].image_id;
+    const Image& observer = rec.GetImage(observer_id);
+    if ((observer.cam_from_world * (0.5 * (old.xyz + recent.xyz))).z() <= 0.0) return;
+    const double focal = rec.GetCamera(observer.camera_id).MeanFocalLength();
     adjuster.problem().AddResidualBlock(
-        PointCoincidenceCost::Create(scale * options.split_weight * focal / depth), nullptr,
-        adjuster.PointBlock(pair.old_id), adjuster.PointBlock(pair.recent_id));
+        DepthScaledCoincidenceCost::Create(scale * options.split_weight * focal), nullptr,
+        adjuster.PointBlock(pair.old_id), adjuster.PointBlock(pair.recent_id),
+        adjuster.PoseRotationBlock(observer_id), adjuster.PoseTranslationBlock(observer_id));
   };
   // As after a pose-graph correction, the cameras start far from where the ties take them:
   // a bundle over the longest tracks moves them first. A tied point is not eliminated with

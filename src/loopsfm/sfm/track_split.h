@@ -18,11 +18,13 @@
 // agreeing (points that missed merging by a few pixels).
 //
 // Correction: a global bundle adjustment with, for each kept pair, the term
-//   w * (X_old - X_recent),  w = split_weight * focal / depth,
-// where depth is the mean distance of the two points from the frames observing them. The
-// term is in pixels of the pair's separation as its observers see it, so its weight does not
-// depend on the model's arbitrary scale and stays comparable to the reprojection errors; a
-// few hundred pairs outweigh nothing locally yet move the frames between the ends. That
+//   w * (X_old - X_recent) / depth,  w = split_weight * focal,
+// where depth is that of the pair's midpoint in the old point's median observer, a variable
+// of the bundle like the points. The term is in pixels of the pair's separation as that frame
+// sees it: it does not depend on the model's arbitrary scale, during the solve too (a term in
+// world units would get cheaper as the model shrinks), and stays comparable to the
+// reprojection errors; a few hundred pairs outweigh nothing locally yet move the frames
+// between the ends. That
 // bundle runs over the longest tracks only (refine_points_per_frame, as after a pose-graph
 // correction) with up to split_refine_ties_per_group pairs of each group, weighted to pull as
 // hard as the whole group: a tied point cannot be eliminated in the Schur complement, so

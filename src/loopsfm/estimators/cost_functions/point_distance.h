@@ -1,17 +1,16 @@
 #pragma once
 // Constraints between two 3D points, for loop closing: when a track is split where the
 // trajectory drifted, its parts are tied back together by these terms.
-//
-// Parameter blocks: point3D_a_in_world (3), point3D_b_in_world (3).
 
 #include <Eigen/Core>
+#include <Eigen/Geometry>
 #include <ceres/autodiff_cost_function.h>
 #include <ceres/cost_function.h>
 
 namespace loopsfm {
 
 // weight * (|X_a - X_b| - distance): one residual. Not differentiable where X_a = X_b, so
-// use PointCoincidenceCost for a target distance of zero.
+// use DepthScaledCoincidenceCost for a target distance of zero.
 class PointDistanceCost {
  public:
   PointDistanceCost(double distance, double weight) : distance_(distance), weight_(weight) {}
@@ -40,19 +39,37 @@ class PointDistanceCost {
   double weight_;
 };
 
-// weight * (X_a - X_b): three residuals, pulling two points onto each other.
-class PointCoincidenceCost {
+// weight * (X_a - X_b) / depth: three residuals pulling two points onto each other, their
+// separation measured against the depth of their midpoint in an observing frame, so that
+// weight = focal length gives about the separation in pixels as that frame sees it. Scale
+// free: a similarity of the whole model (points and cameras) leaves the cost unchanged, so
+// the term cannot be lowered by shrinking the model away from a fixed gauge, as a term in
+// world units can (monocular scale is arbitrary). Not finite where the midpoint is not in
+// front of the frame: a step that takes it there is rejected.
+//
+// Parameter blocks: point3D_a_in_world (3), point3D_b_in_world (3), and the observing frame's
+// cam_from_world rotation (4, Eigen quaternion x, y, z, w, unit norm: use
+// ceres::EigenQuaternionManifold) and translation (3).
+class DepthScaledCoincidenceCost {
  public:
-  explicit PointCoincidenceCost(double weight) : weight_(weight) {}
+  explicit DepthScaledCoincidenceCost(double weight) : weight_(weight) {}
 
   static ceres::CostFunction* Create(double weight = 1.0) {
-    return new ceres::AutoDiffCostFunction<PointCoincidenceCost, 3, 3, 3>(
-        new PointCoincidenceCost(weight));
+    return new ceres::AutoDiffCostFunction<DepthScaledCoincidenceCost, 3, 3, 3, 4, 3>(
+        new DepthScaledCoincidenceCost(weight));
   }
 
   template <typename T>
-  bool operator()(const T* point_a, const T* point_b, T* residuals) const {
-    for (int i = 0; i < 3; ++i) residuals[i] = T(weight_) * (point_a[i] - point_b[i]);
+  bool operator()(const T* point_a, const T* point_b, const T* cam_from_world_rotation,
+                  const T* cam_from_world_translation, T* residuals) const {
+    const Eigen::Map<const Eigen::Matrix<T, 3, 1>> a(point_a);
+    const Eigen::Map<const Eigen::Matrix<T, 3, 1>> b(point_b);
+    const Eigen::Map<const Eigen::Quaternion<T>> rotation(cam_from_world_rotation);
+    const Eigen::Map<const Eigen::Matrix<T, 3, 1>> translation(cam_from_world_translation);
+    const Eigen::Matrix<T, 3, 1> midpoint = T(0.5) * (a + b);
+    const T depth = (rotation * midpoint).z() + translation.z();
+    if (!(depth > T(0))) return false;
+    for (int i = 0; i < 3; ++i) residuals[i] = T(weight_) * (point_a[i] - point_b[i]) / depth;
     return true;
   }
 
