@@ -24,7 +24,8 @@
 // sees it: it does not depend on the model's arbitrary scale, during the solve too (a term in
 // world units would get cheaper as the model shrinks), and stays comparable to the
 // reprojection errors; a few hundred pairs outweigh nothing locally yet move the frames
-// between the ends. That
+// between the ends. (The observer could still lower a term by backing away from the pair;
+// its own reprojection terms hold it at this weight, not at a hundred times it.) That
 // bundle runs over the longest tracks only (refine_points_per_frame, as after a pose-graph
 // correction) with up to split_refine_ties_per_group pairs of each group, weighted to pull as
 // hard as the whole group: a tied point cannot be eliminated in the Schur complement, so
