@@ -13,6 +13,7 @@ namespace loopsfm {
 namespace {
 
 using testing::MapperProblem;
+using testing::RegisterTurnedAndScaled;
 using testing::RegisterWithDrift;
 using testing::WalkOutAndBack;
 
@@ -80,7 +81,7 @@ TEST(LoopCloser, TurnedAndScaledWalkBackIsClosedAndItsEndsFused) {
   const MapperProblem p = WalkOutAndBack();
   const IncrementalMapperOptions options = LoopOptions();
   MapperState state(p.input, options);
-  RegisterWithDrift(p, state, 0.005, 0.15, 0.004);
+  RegisterTurnedAndScaled(p, state);
   const testing::PoseError before = testing::ComparePoses(state.reconstruction(), p);
   const size_t points_before = state.reconstruction().NumPoints3D();
 

@@ -52,6 +52,12 @@ inline void RegisterWithDrift(const MapperProblem& p, MapperState& state, double
   state.SetGauge(p.input.frames[0].image_id, p.input.frames[1].image_id);
 }
 
+// The walk back drifted as a focal length a few percent off drifts a lap (drift2): 5 mm
+// sideways, a turn of 0.15 degrees and 0.4 % of scale per frame.
+inline void RegisterTurnedAndScaled(const MapperProblem& p, MapperState& state) {
+  RegisterWithDrift(p, state, 0.005, 0.15, 0.004);
+}
+
 // The report's loop links are all of `method`, each from a frame of the walk out to one at
 // least min_frame_gap later, and carry `num_point_pairs` pairs in all.
 inline void ExpectLinksAcrossTheLoop(const MapperProblem& p, const MapperReport& report,

@@ -8,6 +8,7 @@ namespace loopsfm {
 namespace {
 
 using testing::MapperProblem;
+using testing::RegisterTurnedAndScaled;
 using testing::RegisterWithDrift;
 using testing::WalkOutAndBack;
 
@@ -55,7 +56,7 @@ TEST(TrackSplit, ScaleDriftIsCorrectedWithoutShrinkingTheModel) {
   const MapperProblem p = WalkOutAndBack();
   const IncrementalMapperOptions options = SplitOptions();
   MapperState state(p.input, options);
-  RegisterWithDrift(p, state, 0.005, 0.15, 0.004);
+  RegisterTurnedAndScaled(p, state);
   const testing::PoseError before = testing::ComparePoses(state.reconstruction(), p);
   const Reconstruction& rec = state.reconstruction();
   const image_t first = p.input.frames[0].image_id, second = p.input.frames[1].image_id;
