@@ -187,11 +187,21 @@ TEST_F(CliExportTest, TransformsJsonConvertsBackToTheColmapModel) {
 
 TEST_F(CliExportTest, UndistortedModelReadsInColmapAndReprojectsAsWell) {
   if (!OnPath("colmap")) GTEST_SKIP() << "colmap is not installed (scripts/setup installs it)";
-  const fs::path text_d = *dir_ / "text_distorted", text_u = *dir_ / "text_undistorted";
-  fs::create_directories(text_d);
-  fs::create_directories(text_u);
+  // COLMAP's own undistorter on the same frames and model: what Gaussian splatting's
+  // convert.py would have produced.
+  const fs::path by_colmap = *dir_ / "colmap_undistorted";
+  const CommandResult undistort = RunShell(fmt::format(
+      "colmap image_undistorter --image_path {} --input_path {} --output_path {} "
+      "--output_type COLMAP",
+      ShellQuote((Out() / "images").string()), ShellQuote((Out() / "sparse" / "0").string()),
+      ShellQuote(by_colmap.string())));
+  ASSERT_EQ(undistort.exit_code, 0) << undistort;
+  const fs::path text_d = *dir_ / "text_distorted", text_u = *dir_ / "text_undistorted",
+                 text_c = *dir_ / "text_colmap_undistorted";
   for (const auto& [in, out] : {std::pair{Out() / "sparse" / "0", text_d},
-                                std::pair{Out() / "undistorted" / "sparse" / "0", text_u}}) {
+                                std::pair{Out() / "undistorted" / "sparse" / "0", text_u},
+                                std::pair{by_colmap / "sparse", text_c}}) {
+    fs::create_directories(out);
     const CommandResult convert = RunShell(fmt::format(
         "colmap model_converter --input_path {} --output_path {} --output_type TXT",
         ShellQuote(in.string()), ShellQuote(out.string())));
@@ -205,14 +215,29 @@ TEST_F(CliExportTest, UndistortedModelReadsInColmapAndReprojectsAsWell) {
   ASSERT_EQ(undistorted.images.size(), distorted.images.size());
   ASSERT_EQ(undistorted.points.size(), distorted.points.size());
 
-  // Pixel errors grow where undistortion stretches the image (the periphery of a barrel lens,
-  // a few percent here); anything more is a mismatch of keypoints and camera.
+  // The same rays in both models, so the same errors in angle; in pixels they grow where
+  // undistortion stretches the image (the periphery of a barrel lens, a few percent here), for
+  // COLMAP's undistorter as for ours. Anything more is a mismatch of keypoints and camera.
+  const TextModel colmap = TextModel::Read(text_c);
+  ASSERT_EQ(colmap.cameras.size(), 1u);
+  const TextModel::Cam& colmap_pinhole = colmap.cameras.begin()->second;
+  EXPECT_EQ(colmap_pinhole.model, "PINHOLE");
+  // The same focal length; the size may differ by a pixel (loopsfm's rectangle runs through
+  // the centres of the border pixels), the principal point with it.
+  EXPECT_NEAR(pinhole.width, colmap_pinhole.width, 1);
+  EXPECT_NEAR(pinhole.height, colmap_pinhole.height, 1);
+  EXPECT_NEAR(pinhole.params[0], colmap_pinhole.params[0], 1e-9);
+  EXPECT_NEAR(pinhole.params[1], colmap_pinhole.params[1], 1e-9);
+  EXPECT_NEAR(pinhole.params[2], colmap_pinhole.params[2], 0.5 + 1e-9);
+  EXPECT_NEAR(pinhole.params[3], colmap_pinhole.params[3], 0.5 + 1e-9);
   const double error_d = distorted.MeanReprojectionError();
   const double error_u = undistorted.MeanReprojectionError();
+  const double error_c = colmap.MeanReprojectionError();
   std::cout << "[ info     ] reprojection error: distorted " << error_d << " px, undistorted "
-            << error_u << " px\n";
+            << error_u << " px, by COLMAP's image_undistorter " << error_c << " px\n";
   EXPECT_GT(error_d, 0.0);
   EXPECT_LT(error_u, 1.05 * error_d);
+  EXPECT_LE(error_u, 1.001 * error_c);
 
   // The undistorted images show at each undistorted keypoint what the original frame shows at
   // the keypoint it came from; a mismatch of image and model would compare unrelated pixels.
