@@ -75,6 +75,11 @@ struct LoopClosureOptions {
   double max_reproj_error_px = 8.0;
   // Plausible drift: the correction moves the recent end by at most this fraction of the
   // path walked between the two ends, and scales it by at most this factor (either way).
+  // After mapping (withheld pairs) every loop is judged against the uncorrected map, so the
+  // scale bound sees all the drift between its ends: on drift2 (focal -5 %, two laps) the
+  // second lap's end against the start asks for 2.2 and is refused, and the bundle after the
+  // pose graph then closes that loop itself, slowly (stop-26 note). Look-alike places
+  // (repeated facades) are refused by the translation bound, not this one.
   double max_correction_fraction_of_path = 0.1;
   double max_correction_scale = 1.5;
   // Pose graph: frames sharing this many points are joined by a co-visibility edge; a loop
