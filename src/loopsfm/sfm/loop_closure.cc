@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <map>
+#include <string>
 
 #include "loopsfm/estimators/pose_graph.h"
 #include "loopsfm/sfm/mapper_state.h"
@@ -402,6 +403,33 @@ bool LoopCloser::CloseGathered(MapperState& model, MapperReport* report) {
   return closed;
 }
 
+namespace {
+
+// Diagnostic: the consecutive step that grew most against its length before the
+// correction, relative to the median step's growth (a correction should spread along the
+// path, not bend it in one place).
+std::string StretchedStep(const Reconstruction& rec, const std::vector<image_t>& ordered,
+                          const std::map<image_t, Sim3d>& before) {
+  std::vector<std::pair<double, size_t>> growth;  // (now / before, index of the step's start)
+  for (size_t i = 0; i + 1 < ordered.size(); ++i) {
+    const image_t a = ordered[i], b = ordered[i + 1];
+    const double was = (before.at(b).translation - before.at(a).translation).norm();
+    const double now =
+        (rec.GetImage(b).ProjectionCenter() - rec.GetImage(a).ProjectionCenter()).norm();
+    if (was > 0.0) growth.push_back({now / was, i});
+  }
+  if (growth.empty()) return "no steps";
+  std::vector<std::pair<double, size_t>> sorted = growth;
+  std::nth_element(sorted.begin(), sorted.begin() + sorted.size() / 2, sorted.end());
+  const double median = sorted[sorted.size() / 2].first;
+  const auto [largest, at] = *std::max_element(growth.begin(), growth.end());
+  return fmt::format("largest step {} -> {}: {:.2f}x its length before, median step {:.2f}x",
+                     rec.GetImage(ordered[at]).name, rec.GetImage(ordered[at + 1]).name, largest,
+                     median);
+}
+
+}  // namespace
+
 bool LoopCloser::Close(MapperState& model, const std::vector<LoopEdge>& loop_edges,
                        double loop_weight, const std::vector<PointPair>& fuse,
                        MapperReport* report) {
@@ -475,8 +503,9 @@ bool LoopCloser::Close(MapperState& model, const std::vector<LoopEdge>& loop_edg
     rec.GetImage(id).cam_from_world = node.ToRigid().Inverse();
   }
   const PoseGraphReport& solved = graph.report();
-  spdlog::debug("loop: pose graph {} nodes, {} edges, {} iterations, {:.2f} s", solved.num_nodes,
-                solved.num_edges, solved.num_iterations, solved.time_s);
+  spdlog::debug("loop: pose graph {} nodes, {} edges, {} iterations, {:.2f} s; {}",
+                solved.num_nodes, solved.num_edges, solved.num_iterations, solved.time_s,
+                StretchedStep(rec, ordered, before));
   // The loop's inlier pairs become one point each (ORB-SLAM's loop fusion): the pose graph
   // only approximates the correction, so few of them would agree to the pixel yet and merge
   // by themselves, and without points seen from both ends nothing in the refining bundle
@@ -492,7 +521,10 @@ bool LoopCloser::Close(MapperState& model, const std::vector<LoopEdge>& loop_edg
   model.RetriangulateAll();
   spdlog::debug("loop: {} point pairs fused, re-triangulation {:.2f} s, {} points", fused,
                 timer.ElapsedSeconds(), rec.NumPoints3D());
-  if (refine_) model.RefineAfterCorrection(report);
+  if (refine_) {
+    model.RefineAfterCorrection(report);
+    spdlog::debug("loop: refined; {}", StretchedStep(rec, ordered, before));
+  }
   return true;
 }
 

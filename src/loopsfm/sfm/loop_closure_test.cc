@@ -149,6 +149,49 @@ TEST(LoopCloser, CorrectionTooLargeForDriftIsRefused) {
   EXPECT_GE(report.num_loops_refused, 1);
 }
 
+// What makes a correction plausible as drift. Scale drift builds up along a loop: a loop's
+// ends can differ in scale by far more than one lap's drift (drift2, focal -5 %: one lap
+// 1.5, two laps 2.2) while the recent end barely moves (a path scaled about its start keeps
+// its end near the start). Look-alike places ask for a large move instead.
+TEST(LoopCloser, CorrectionOfSeveralLapsOfScaleDriftIsPlausible) {
+  const MapperProblem p = WalkOutAndBack();
+  MapperState state(p.input, LoopOptions());
+  RegisterWithDrift(p, state, 0.0);
+  const Reconstruction& rec = state.reconstruction();
+  const int last = static_cast<int>(p.input.frames.size()) - 1;
+  const image_t recent = p.input.frames[last].image_id;
+  const Eigen::Vector3d start = rec.GetImage(p.input.frames[0].image_id).ProjectionCenter();
+  auto scaled_about_start = [&](double scale) {
+    Sim3d old_from_recent;
+    old_from_recent.scale = scale;
+    old_from_recent.translation = start - scale * start;
+    return old_from_recent;
+  };
+  const LoopClosureOptions defaults;
+  const DriftCorrection two_laps =
+      MeasureCorrection(rec, p.input, scaled_about_start(1.0 / 2.2), recent, 0, last, defaults);
+  EXPECT_DOUBLE_EQ(two_laps.scale, 1.0 / 2.2);
+  EXPECT_LT(two_laps.fraction_of_path, 0.5 * defaults.max_correction_fraction_of_path);
+  EXPECT_TRUE(two_laps.plausible);
+  const DriftCorrection too_large =
+      MeasureCorrection(rec, p.input, scaled_about_start(1.0 / 3.5), recent, 0, last, defaults);
+  EXPECT_LT(too_large.fraction_of_path, defaults.max_correction_fraction_of_path);
+  EXPECT_FALSE(too_large.plausible) << "scale 3.5 is no drift";
+  LoopClosureOptions one_lap = defaults;
+  one_lap.max_correction_scale = 1.5;
+  EXPECT_FALSE(
+      MeasureCorrection(rec, p.input, scaled_about_start(1.0 / 2.2), recent, 0, last, one_lap)
+          .plausible);
+  // A look-alike place: no change of scale, but the recent end moved by a fifth of the path.
+  const double path = two_laps.translation / two_laps.fraction_of_path;
+  Sim3d elsewhere;
+  elsewhere.translation = Eigen::Vector3d(0.2 * path, 0.0, 0.0);
+  const DriftCorrection look_alike =
+      MeasureCorrection(rec, p.input, elsewhere, recent, 0, last, defaults);
+  EXPECT_NEAR(look_alike.fraction_of_path, 0.2, 1e-9);
+  EXPECT_FALSE(look_alike.plausible);
+}
+
 // The alternate pose diagnostic: a frame at the end of the drifted walk back sees each
 // track's old point (where the first frames put it) and its recent one (where the drifted
 // walk back put it); registered again, one pose fits one end and a second RANSAC over the
