@@ -572,6 +572,9 @@ bool BundleAdjuster::Solve(Reconstruction* reconstruction) {
   report_.termination = ceres::TerminationTypeToString(summary_.termination_type);
   report_.settled = settled && summary_.termination_type == ceres::USER_SUCCESS;
   report_.time_s = summary_.total_time_in_seconds;
+  report_.residual_time_s = summary_.residual_evaluation_time_in_seconds;
+  report_.jacobian_time_s = summary_.jacobian_evaluation_time_in_seconds;
+  report_.linear_solver_time_s = summary_.linear_solver_time_in_seconds;
   return report_.success;
 }
 

@@ -188,6 +188,10 @@ struct BundleAdjustmentReport {
   // The solve ended because the cameras had settled (settle_tolerance).
   bool settled = false;
   double time_s = 0.0;
+  // Where the time went: residuals and Jacobians evaluated, linear systems solved.
+  double residual_time_s = 0.0;
+  double jacobian_time_s = 0.0;
+  double linear_solver_time_s = 0.0;
 };
 
 class BundleAdjuster {

@@ -251,11 +251,12 @@ bool MapperState::GlobalBundle(MapperReport* report, const GlobalBundleScope& sc
   const bool ok = ReportSolve(adjuster, &reconstruction_, "global", report);
   const BundleAdjustmentReport& solved = adjuster.report();
   spdlog::debug("global bundle: {} frames, {} points, {} residual blocks, {} iterations{}, cost "
-                "{:.6g} -> {:.6g}, {:.1f} s",
+                "{:.6g} -> {:.6g}, {:.1f} s (residuals {:.1f} s, Jacobians {:.1f} s, {} {:.1f} s)",
                 solved.num_variable_images, solved.num_variable_points,
                 solved.num_residual_blocks, solved.num_iterations,
                 solved.settled ? " (cameras settled)" : "", solved.initial_cost,
-                solved.final_cost, timer.ElapsedSeconds());
+                solved.final_cost, timer.ElapsedSeconds(), solved.residual_time_s,
+                solved.jacobian_time_s, solved.linear_solver, solved.linear_solver_time_s);
   report->num_global_ba_iterations += adjuster.report().num_iterations;
   report->num_global_ba_residuals += adjuster.report().num_residual_blocks;
   ++report->num_global_ba;
