@@ -479,7 +479,9 @@ TEST(BundleAdjustment, RestrictedToSomePointsLeavesTheOthersOut) {
   EXPECT_EQ(adjuster.report().num_reprojection_residual_blocks, static_cast<int>(expected_blocks));
   EXPECT_EQ(adjuster.report().num_variable_points, static_cast<int>(subset.size()));
   for (const auto& [id, point] : reconstruction.Points3D()) {
-    if (subset.count(id) == 0) EXPECT_EQ(point.xyz, before.GetPoint3D(id).xyz) << id;
+    if (subset.count(id) == 0) {
+      EXPECT_EQ(point.xyz, before.GetPoint3D(id).xyz) << id;
+    }
   }
   // Image 1 and one coordinate of image 2 fix the gauge up to the scale the perturbed
   // translation of image 2 sets; compare the others' centres after a similarity.
