@@ -183,6 +183,7 @@ TEST(LoopCloser, CorrectionOfSeveralLapsOfScaleDriftIsPlausible) {
       MeasureCorrection(rec, p.input, scaled_about_start(1.0 / 2.2), recent, 0, last, one_lap)
           .plausible);
   // A look-alike place: no change of scale, but the recent end moved by a fifth of the path.
+  ASSERT_GT(two_laps.translation, 0.0);  // the walk back ends beside the start, not on it
   const double path = two_laps.translation / two_laps.fraction_of_path;
   Sim3d elsewhere;
   elsewhere.translation = Eigen::Vector3d(0.2 * path, 0.0, 0.0);
