@@ -86,9 +86,9 @@ int Main(int argc, char** argv) {
     std::string name;
     BundleLinearSolver solver;
     // Hold the second gauge frame's whole translation (over-fixing the gauge by two
-    // coordinates): a constant block instead of the gauge prior, to check that the prior
-    // costs nothing over it (both leave every pose block of tangent size 3, for Ceres'
-    // fixed-size Schur kernel; the SubsetManifold before them did not, and was 16 % slower).
+    // coordinates) by three priors instead of one, to check that the gauge prior costs
+    // nothing (every pose block keeps tangent size 6, for Ceres' fixed-size Schur kernel; a
+    // SubsetManifold would not, and was 16 % slower).
     bool full_gauge_block = false;
   };
   const std::vector<Variant> variants = {

@@ -5,6 +5,9 @@
 #include <optional>
 #include <thread>
 
+#include <ceres/manifold.h>
+#include <ceres/product_manifold.h>
+
 #include "loopsfm/estimators/bundle_settled.h"
 #include "loopsfm/estimators/cost_functions/reprojection_error.h"
 #include "loopsfm/util/errors.h"
@@ -97,21 +100,23 @@ class CameraParamsManifold : public ceres::Manifold {
   std::vector<int> free_;
 };
 
-// Holds one coordinate of a translation at its start value: r = weight * (t[c] - t0[c]).
-// Used instead of a SubsetManifold for the scale gauge, so that the translation block keeps
-// tangent size 3: with every pose block of size 3, Ceres picks its fixed-size Schur kernel
-// (SchurEliminator<2, 3, 3>), measured 16 % faster on block.mp4's global bundle
-// (bench/bundle_adjustment). The data cannot move the gauge, so at the optimum the prior is
-// zero and the solution is the one the hard constraint gives.
-class TranslationCoordinatePrior final : public ceres::SizedCostFunction<1, 3> {
+// Holds one coordinate of a pose's translation at its start value:
+// r = weight * (t[c] - t0[c]) on the 7-parameter pose block. Used instead of a manifold
+// holding the coordinate for the scale gauge, so that the pose block keeps tangent size 6:
+// with every pose block of one size, Ceres picks its fixed-size Schur kernel
+// (SchurEliminator<2, 3, 6>; with separate rotation and translation blocks a SubsetManifold
+// was measured 16 % slower on block.mp4's global bundle, bench/bundle_adjustment). The data
+// cannot move the gauge, so at the optimum the prior is zero and the solution is the one
+// the hard constraint gives.
+class TranslationCoordinatePrior final : public ceres::SizedCostFunction<1, 7> {
  public:
   TranslationCoordinatePrior(int coord, double value, double weight)
       : coord_(coord), value_(value), weight_(weight) {}
   bool Evaluate(double const* const* parameters, double* residuals,
                 double** jacobians) const override {
-    residuals[0] = weight_ * (parameters[0][coord_] - value_);
+    residuals[0] = weight_ * (parameters[0][4 + coord_] - value_);
     if (jacobians != nullptr && jacobians[0] != nullptr) {
-      for (int i = 0; i < 3; ++i) jacobians[0][i] = i == coord_ ? weight_ : 0.0;
+      for (int i = 0; i < 7; ++i) jacobians[0][i] = i == 4 + coord_ ? weight_ : 0.0;
     }
     return true;
   }
@@ -275,27 +280,33 @@ void BundleAdjuster::AddPoseBlocks(image_t image_id) {
   pose_blocks_.insert(image_id);
   Image& image = reconstruction_->GetImage(image_id);
   image.cam_from_world.rotation.normalize();
-  double* rotation = image.cam_from_world.rotation.coeffs().data();
-  double* translation = image.cam_from_world.translation.data();
-  problem_->AddParameterBlock(rotation, 4, new ceres::EigenQuaternionManifold());
-  problem_->AddParameterBlock(translation, 3);
-  if (config_.HasConstantPose(image_id)) {
-    problem_->SetParameterBlockConstant(rotation);
-    problem_->SetParameterBlockConstant(translation);
+  double* pose = PoseParameters(image.cam_from_world);
+  const std::vector<int>* coords = config_.ConstantTranslationCoords(image_id);
+  const double norm = image.cam_from_world.translation.norm();
+  const bool constant = config_.HasConstantPose(image_id);
+  if (!constant && coords != nullptr && norm < 1e-9) {
+    // The prior's weight needs a length: hold the coordinates by the manifold (a tangent
+    // size other than 6 for this one block, so Ceres' general Schur kernel).
+    problem_->AddParameterBlock(
+        pose, 7,
+        new ceres::ProductManifold<ceres::EigenQuaternionManifold, ceres::SubsetManifold>(
+            ceres::EigenQuaternionManifold(), ceres::SubsetManifold(3, *coords)));
     return;
   }
-  if (const std::vector<int>* coords = config_.ConstantTranslationCoords(image_id)) {
-    if (coords->size() == 3) {
-      problem_->SetParameterBlockConstant(translation);
-    } else if (const double norm = image.cam_from_world.translation.norm(); norm < 1e-9) {
-      problem_->SetManifold(translation, new ceres::SubsetManifold(3, *coords));
-    } else {
-      // A step of 1e-6 of the translation's length costs a pixel.
-      const double weight = 1e6 / norm;
-      for (const int c : *coords) {
-        problem_->AddResidualBlock(new TranslationCoordinatePrior(c, translation[c], weight),
-                                   nullptr, translation);
-      }
+  problem_->AddParameterBlock(
+      pose, 7,
+      new ceres::ProductManifold<ceres::EigenQuaternionManifold, ceres::EuclideanManifold<3>>(
+          ceres::EigenQuaternionManifold(), ceres::EuclideanManifold<3>()));
+  if (constant) {
+    problem_->SetParameterBlockConstant(pose);
+    return;
+  }
+  if (coords != nullptr) {
+    // A step of 1e-6 of the translation's length costs a pixel.
+    const double weight = 1e6 / norm;
+    for (const int c : *coords) {
+      problem_->AddResidualBlock(new TranslationCoordinatePrior(c, pose[4 + c], weight),
+                                 nullptr, pose);
     }
   }
 }
@@ -310,8 +321,7 @@ void BundleAdjuster::AddImage(image_t image_id) {
 
   const bool constant_pose = config_.HasConstantPose(image_id);
   if (!constant_pose) AddPoseBlocks(image_id);
-  double* rotation = image.cam_from_world.rotation.coeffs().data();
-  double* translation = image.cam_from_world.translation.data();
+  double* pose = PoseParameters(image.cam_from_world);
 
   const bool constant_camera = IsCameraConstant(image.camera_id);
   for (const Point2D& point2D : image.points2D) {
@@ -323,11 +333,10 @@ void BundleAdjuster::AddImage(image_t image_id) {
     } else if (constant_camera) {
       problem_->AddResidualBlock(
           CreateReprojectionErrorConstantCameraCost(camera.model_id, camera.params, point2D.xy),
-          loss_function_, rotation, translation, point.xyz.data());
+          loss_function_, pose, point.xyz.data());
     } else {
       problem_->AddResidualBlock(CreateReprojectionErrorCost(camera.model_id, point2D.xy),
-                                 loss_function_, rotation, translation, point.xyz.data(),
-                                 camera.params.data());
+                                 loss_function_, pose, point.xyz.data(), camera.params.data());
     }
     ++report_.num_reprojection_residual_blocks;
   }
@@ -412,16 +421,10 @@ bool BundleAdjuster::HasPoseBlocks(image_t image_id) const {
   return pose_blocks_.count(image_id) > 0;
 }
 
-double* BundleAdjuster::PoseRotationBlock(image_t image_id) {
+double* BundleAdjuster::PoseBlock(image_t image_id) {
   LOOPSFM_CHECK_MSG(problem_ != nullptr, "BundleAdjuster::SetUp must be called first");
   AddPoseBlocks(image_id);
-  return reconstruction_->GetImage(image_id).cam_from_world.rotation.coeffs().data();
-}
-
-double* BundleAdjuster::PoseTranslationBlock(image_t image_id) {
-  LOOPSFM_CHECK_MSG(problem_ != nullptr, "BundleAdjuster::SetUp must be called first");
-  AddPoseBlocks(image_id);
-  return reconstruction_->GetImage(image_id).cam_from_world.translation.data();
+  return PoseParameters(reconstruction_->GetImage(image_id).cam_from_world);
 }
 
 double* BundleAdjuster::PointBlock(point3D_t point3D_id) {
@@ -449,12 +452,8 @@ double* BundleAdjuster::CameraBlock(camera_t camera_id) {
 void BundleAdjuster::ConfigureSolver(ceres::Solver::Options* solver_options) {
   int num_variable_images = 0;
   for (const image_t image_id : pose_blocks_) {
-    const double* rotation =
-        reconstruction_->GetImage(image_id).cam_from_world.rotation.coeffs().data();
-    const double* translation =
-        reconstruction_->GetImage(image_id).cam_from_world.translation.data();
-    if (!problem_->IsParameterBlockConstant(rotation) ||
-        !problem_->IsParameterBlockConstant(translation)) {
+    if (!problem_->IsParameterBlockConstant(
+            PoseParameters(reconstruction_->GetImage(image_id).cam_from_world))) {
       ++num_variable_images;
     }
   }
@@ -541,8 +540,8 @@ bool BundleAdjuster::Solve(Reconstruction* reconstruction) {
   if (options_.settle_tolerance > 0.0) {
     std::vector<image_t> variable_images;
     for (const image_t id : Sorted(pose_blocks_)) {
-      const double* rotation = reconstruction_->GetImage(id).cam_from_world.rotation.coeffs().data();
-      if (!problem_->IsParameterBlockConstant(rotation)) variable_images.push_back(id);
+      const double* pose = PoseParameters(reconstruction_->GetImage(id).cam_from_world);
+      if (!problem_->IsParameterBlockConstant(pose)) variable_images.push_back(id);
     }
     if (variable_images.size() >= 2) {
       settled = std::make_unique<SettledCallback>(*reconstruction_, std::move(variable_images),

@@ -217,12 +217,11 @@ class BundleAdjuster {
   // to images and points with no observations in the config); a block added this way is
   // constant when the config says so (constant pose, constant point, constant camera) and
   // variable otherwise. Must be called after SetUp.
-  double* PoseRotationBlock(image_t image_id);     // 4: Eigen quaternion x, y, z, w
-  double* PoseTranslationBlock(image_t image_id);  // 3
-  double* PointBlock(point3D_t point3D_id);        // 3
-  double* CameraBlock(camera_t camera_id);         // Model::kNumParams
-  // Whether a pose's blocks are in the problem. Poses held constant by the config get
-  // constant-pose reprojection terms and no blocks until PoseRotationBlock asks for them.
+  double* PoseBlock(image_t image_id);        // 7: quaternion x, y, z, w, translation
+  double* PointBlock(point3D_t point3D_id);   // 3
+  double* CameraBlock(camera_t camera_id);    // Model::kNumParams
+  // Whether a pose's block is in the problem. Poses held constant by the config get
+  // constant-pose reprojection terms and no block until PoseBlock asks for it.
   bool HasPoseBlocks(image_t image_id) const;
 
   const BundleAdjustmentReport& report() const { return report_; }

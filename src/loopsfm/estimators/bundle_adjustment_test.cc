@@ -576,12 +576,9 @@ TEST(BundleAdjustment, PoseGraphThroughBlockAccessors) {
     const Rigid3d b_from_a =
         truth.GetImage(b).cam_from_world * truth.GetImage(a).cam_from_world.Inverse();
     adjuster.problem().AddResidualBlock(
-        RelativePoseCost::Create(b_from_a), nullptr, adjuster.PoseRotationBlock(a),
-        adjuster.PoseTranslationBlock(a), adjuster.PoseRotationBlock(b),
-        adjuster.PoseTranslationBlock(b));
+        RelativePoseCost::Create(b_from_a), nullptr, adjuster.PoseBlock(a), adjuster.PoseBlock(b));
   }
-  adjuster.problem().SetParameterBlockConstant(adjuster.PoseRotationBlock(1));
-  adjuster.problem().SetParameterBlockConstant(adjuster.PoseTranslationBlock(1));
+  adjuster.problem().SetParameterBlockConstant(adjuster.PoseBlock(1));
   ASSERT_TRUE(adjuster.Solve(&reconstruction)) << adjuster.FullReport();
   EXPECT_NE(adjuster.report().linear_solver.find("CHOLESKY"), std::string::npos);
   const PoseErrors errors = ComparePoses(truth, reconstruction);
@@ -645,6 +642,34 @@ TEST(BundleAdjustment, SettleToleranceEndsTheSolveOnceTheCamerasSettle) {
   EXPECT_GT(error.max_centre, 10 * difference.max_centre);
 }
 
+// A gauge frame whose translation is zero (its centre at the world's origin) gives the
+// coordinate prior no length to scale by: the pose block then holds the coordinates through
+// its manifold, here all three (the rotation alone free), and the rest converges as usual.
+TEST(BundleAdjustment, ZeroTranslationGaugeCoordinatesAreHeldExactly) {
+  Reconstruction truth = MakeArcScene(CameraModelId::kPinhole, 10, 300, 41);
+  const Eigen::Vector3d origin = truth.GetImage(2).ProjectionCenter();
+  for (const image_t id : truth.RegImageIds()) {
+    Rigid3d& pose = truth.GetImage(id).cam_from_world;
+    pose.translation += pose.rotation * origin;
+  }
+  for (auto& [id, point] : truth.Points3D()) point.xyz -= origin;
+  ASSERT_LT(truth.GetImage(2).cam_from_world.translation.norm(), 1e-12);
+  Reconstruction reconstruction = truth;
+  Perturb(&reconstruction, {1}, 0.8, 0.03, 0.03, 42);
+  Image& second = reconstruction.GetImage(2);
+  second.cam_from_world.translation.setZero();
+  BundleAdjustmentConfig config = AllImagesConfig(reconstruction);
+  config.SetConstantPose(1);
+  config.SetConstantTranslationCoords(2, {0, 1, 2});
+
+  BundleAdjuster adjuster(BundleAdjustmentOptions{}, config);
+  ASSERT_TRUE(adjuster.Solve(&reconstruction)) << adjuster.FullReport();
+  EXPECT_EQ(reconstruction.GetImage(2).cam_from_world.translation, Eigen::Vector3d::Zero());
+  const PoseErrors errors = ComparePoses(truth, reconstruction);
+  EXPECT_LT(errors.max_rotation_deg, 1e-6);
+  EXPECT_LT(errors.max_centre, 1e-6);
+}
+
 TEST(BundleAdjustment, GaugeFixUsesTheLargestComponent) {
   const Reconstruction truth = MakeArcScene(CameraModelId::kPinhole, 12, 50, 21);
   BundleAdjustmentConfig config;
@@ -676,6 +701,10 @@ TEST(BundleAdjustment, OptionsCheckRejectsBadValues) {
 }
 
 std::vector<double> ToVector(const Eigen::VectorXd& v) { return {v.data(), v.data() + v.size()}; }
+// The 7 parameters of a pose block: quaternion x, y, z, w, then the translation.
+std::vector<double> PoseVector(const Rigid3d& pose) {
+  return {PoseParameters(pose), PoseParameters(pose) + 7};
+}
 
 // Compares a cost function's Jacobians with central differences in the ambient space.
 void ExpectJacobiansMatchFiniteDifferences(const ceres::CostFunction& cost,
@@ -724,8 +753,7 @@ TEST_P(ReprojectionCostTest, MatchesCameraProjectionAndFiniteDifferences) {
   const Eigen::Vector2d expected = camera.ImgFromCam(cam_from_world * point) - observed;
 
   std::unique_ptr<ceres::CostFunction> cost(CreateReprojectionErrorCost(camera.model_id, observed));
-  std::vector<std::vector<double>> blocks = {ToVector(cam_from_world.rotation.coeffs()),
-                                             ToVector(cam_from_world.translation), ToVector(point),
+  std::vector<std::vector<double>> blocks = {PoseVector(cam_from_world), ToVector(point),
                                              camera.params};
   std::vector<const double*> parameters;
   for (const auto& block : blocks) parameters.push_back(block.data());
@@ -736,7 +764,7 @@ TEST_P(ReprojectionCostTest, MatchesCameraProjectionAndFiniteDifferences) {
 
   std::unique_ptr<ceres::CostFunction> constant_pose(
       CreateReprojectionErrorConstantPoseCost(camera.model_id, cam_from_world, observed));
-  std::vector<std::vector<double>> point_blocks = {blocks[2], blocks[3]};
+  std::vector<std::vector<double>> point_blocks = {blocks[1], blocks[2]};
   std::vector<const double*> point_parameters = {point_blocks[0].data(), point_blocks[1].data()};
   ASSERT_TRUE(constant_pose->Evaluate(point_parameters.data(), residuals.data(), nullptr));
   EXPECT_LT((residuals - expected).norm(), 1e-9);
@@ -745,7 +773,7 @@ TEST_P(ReprojectionCostTest, MatchesCameraProjectionAndFiniteDifferences) {
   // The camera as data: same residuals, derivatives for the remaining blocks only.
   std::unique_ptr<ceres::CostFunction> constant_camera(
       CreateReprojectionErrorConstantCameraCost(camera.model_id, camera.params, observed));
-  std::vector<std::vector<double>> pose_point_blocks = {blocks[0], blocks[1], blocks[2]};
+  std::vector<std::vector<double>> pose_point_blocks = {blocks[0], blocks[1]};
   std::vector<const double*> pose_point_parameters;
   for (const auto& block : pose_point_blocks) pose_point_parameters.push_back(block.data());
   ASSERT_TRUE(constant_camera->Evaluate(pose_point_parameters.data(), residuals.data(), nullptr));
@@ -755,7 +783,7 @@ TEST_P(ReprojectionCostTest, MatchesCameraProjectionAndFiniteDifferences) {
   std::unique_ptr<ceres::CostFunction> constant_pose_camera(
       CreateReprojectionErrorConstantPoseCameraCost(camera.model_id, cam_from_world, camera.params,
                                                     observed));
-  std::vector<std::vector<double>> only_point = {blocks[2]};
+  std::vector<std::vector<double>> only_point = {blocks[1]};
   const double* only_point_parameters[] = {only_point[0].data()};
   ASSERT_TRUE(constant_pose_camera->Evaluate(only_point_parameters, residuals.data(), nullptr));
   EXPECT_LT((residuals - expected).norm(), 1e-9);
@@ -774,14 +802,15 @@ TEST_P(ReprojectionCostTest, AnalyticDerivativesEqualAutomaticDifferentiation) {
   std::unique_ptr<ceres::CostFunction> full(CreateReprojectionErrorCost(camera.model_id, observed));
   std::unique_ptr<ceres::CostFunction> constant_camera(
       CreateReprojectionErrorConstantCameraCost(camera.model_id, camera.params, observed));
-  const int sizes[] = {4, 3, 3, static_cast<int>(camera.params.size())};
+  const int sizes[] = {7, 3, static_cast<int>(camera.params.size())};
   for (const double quaternion_scale : {1.0, 1.3}) {
-    const Eigen::Vector4d q = SmallRotation(random, 35.0).coeffs() * quaternion_scale;
-    const Eigen::Vector3d t(0.3, -0.2, 0.5), point(-0.6, 0.4, 3.5);
-    const double* parameters[] = {q.data(), t.data(), point.data(), camera.params.data()};
-    std::vector<std::vector<double>> expected(4);
+    Eigen::Matrix<double, 7, 1> pose;
+    pose << SmallRotation(random, 35.0).coeffs() * quaternion_scale, 0.3, -0.2, 0.5;
+    const Eigen::Vector3d point(-0.6, 0.4, 3.5);
+    const double* parameters[] = {pose.data(), point.data(), camera.params.data()};
+    std::vector<std::vector<double>> expected(3);
     std::vector<double*> expected_ptrs;
-    for (int b = 0; b < 4; ++b) {
+    for (int b = 0; b < 3; ++b) {
       expected[b].resize(2 * sizes[b]);
       expected_ptrs.push_back(expected[b].data());
     }
@@ -826,14 +855,13 @@ TEST(CostFunctions, DistanceAndRelativePoseJacobiansMatchFiniteDifferences) {
   const Eigen::Quaterniond qa = SmallRotation(random, 40.0);
   const Eigen::Quaterniond qb = SmallRotation(random, 40.0);
   ExpectJacobiansMatchFiniteDifferences(
-      *relative, {ToVector(qa.coeffs()), {0.1, 0.2, 0.3}, ToVector(qb.coeffs()), {-0.4, 0.5, 0.6}});
+      *relative, {PoseVector(Rigid3d(qa, Eigen::Vector3d(0.1, 0.2, 0.3))),
+                  PoseVector(Rigid3d(qb, Eigen::Vector3d(-0.4, 0.5, 0.6)))});
 
   // At the measured relative pose the residual vanishes.
   const Rigid3d cam_a(qa, Eigen::Vector3d(0.1, 0.2, 0.3));
   const Rigid3d cam_b = measured * cam_a;
-  const Eigen::Vector4d ca = cam_a.rotation.coeffs(), cb = cam_b.rotation.coeffs();
-  const double* parameters[] = {ca.data(), cam_a.translation.data(), cb.data(),
-                                cam_b.translation.data()};
+  const double* parameters[] = {PoseParameters(cam_a), PoseParameters(cam_b)};
   Eigen::Matrix<double, 6, 1> residuals;
   ASSERT_TRUE(relative->Evaluate(parameters, residuals.data(), nullptr));
   EXPECT_LT(residuals.norm(), 1e-12);
@@ -849,8 +877,7 @@ TEST(CostFunctions, DepthScaledCoincidenceIsInPixelsAndFreeOfTheModelsScale) {
   std::unique_ptr<ceres::CostFunction> cost(DepthScaledCoincidenceCost::Create(500.0));
   const auto residuals_at = [&](const Rigid3d& pose, const Eigen::Vector3d& pa,
                                 const Eigen::Vector3d& pb) {
-    const Eigen::Vector4d q = pose.rotation.coeffs();
-    const double* parameters[] = {pa.data(), pb.data(), q.data(), pose.translation.data()};
+    const double* parameters[] = {pa.data(), pb.data(), PoseParameters(pose)};
     Eigen::Vector3d residuals;
     EXPECT_TRUE(cost->Evaluate(parameters, residuals.data(), nullptr));
     return residuals;
@@ -870,14 +897,12 @@ TEST(CostFunctions, DepthScaledCoincidenceIsInPixelsAndFreeOfTheModelsScale) {
   EXPECT_GT(residuals.norm(), 1.0);
 
   ExpectJacobiansMatchFiniteDifferences(
-      *cost, {ToVector(a), ToVector(b), ToVector(cam_from_world.rotation.coeffs()),
-              ToVector(cam_from_world.translation)});
+      *cost, {ToVector(a), ToVector(b), PoseVector(cam_from_world)});
 
   // Behind the observer the term is not finite: the solver must reject such a step.
   const Eigen::Vector3d behind_a = -a, behind_b = -b;
-  const Eigen::Vector4d coefficients = Eigen::Quaterniond::Identity().coeffs();
-  const Eigen::Vector3d zero = Eigen::Vector3d::Zero();
-  const double* parameters[] = {behind_a.data(), behind_b.data(), coefficients.data(), zero.data()};
+  const Rigid3d identity;
+  const double* parameters[] = {behind_a.data(), behind_b.data(), PoseParameters(identity)};
   Eigen::Vector3d unused;
   EXPECT_FALSE(cost->Evaluate(parameters, unused.data(), nullptr));
 }

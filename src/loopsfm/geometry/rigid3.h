@@ -2,6 +2,8 @@
 // Rigid and similarity transforms. Names say what they map: cam_from_world maps a
 // point in world coordinates to camera coordinates (COLMAP's pose convention).
 
+#include <cstddef>
+
 #include <Eigen/Core>
 #include <Eigen/Geometry>
 
@@ -31,6 +33,15 @@ struct Rigid3d {
                    rotation * b_from_a.translation + translation);
   }
 };
+
+// The pose as one array of 7 doubles, the quaternion's coefficients (x, y, z, w) and then
+// the translation, for an optimiser to update in place as one parameter block: the two
+// members are laid out back to back (checked here).
+inline double* PoseParameters(Rigid3d& pose) { return pose.rotation.coeffs().data(); }
+inline const double* PoseParameters(const Rigid3d& pose) { return pose.rotation.coeffs().data(); }
+static_assert(sizeof(Eigen::Quaterniond) == 4 * sizeof(double) &&
+                  offsetof(Rigid3d, translation) == 4 * sizeof(double),
+              "Rigid3d's translation must follow its quaternion's coefficients");
 
 struct Sim3d {
   double scale = 1.0;

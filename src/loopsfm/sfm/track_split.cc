@@ -155,7 +155,7 @@ int CloseLoopsBySplitTracks(MapperState& model, const LoopClosureOptions& option
     adjuster.problem().AddResidualBlock(
         DepthScaledCoincidenceCost::Create(scale * options.split_weight * focal), nullptr,
         adjuster.PointBlock(pair.old_id), adjuster.PointBlock(pair.recent_id),
-        adjuster.PoseRotationBlock(observer_id), adjuster.PoseTranslationBlock(observer_id));
+        adjuster.PoseBlock(observer_id));
   };
   // As after a pose-graph correction, the cameras start far from where the ties take them:
   // a bundle over the longest tracks moves them first. A tied point is not eliminated with

@@ -48,24 +48,24 @@ class PointDistanceCost {
 // front of the frame: a step that takes it there is rejected.
 //
 // Parameter blocks: point3D_a_in_world (3), point3D_b_in_world (3), and the observing frame's
-// cam_from_world rotation (4, Eigen quaternion x, y, z, w, unit norm: use
-// ceres::EigenQuaternionManifold) and translation (3).
+// cam_from_world (7: Eigen quaternion x, y, z, w, unit norm, then the translation; the
+// bundle's pose block, see reprojection_error.h).
 class DepthScaledCoincidenceCost {
  public:
   explicit DepthScaledCoincidenceCost(double weight) : weight_(weight) {}
 
   static ceres::CostFunction* Create(double weight = 1.0) {
-    return new ceres::AutoDiffCostFunction<DepthScaledCoincidenceCost, 3, 3, 3, 4, 3>(
+    return new ceres::AutoDiffCostFunction<DepthScaledCoincidenceCost, 3, 3, 3, 7>(
         new DepthScaledCoincidenceCost(weight));
   }
 
   template <typename T>
-  bool operator()(const T* point_a, const T* point_b, const T* cam_from_world_rotation,
-                  const T* cam_from_world_translation, T* residuals) const {
+  bool operator()(const T* point_a, const T* point_b, const T* cam_from_world,
+                  T* residuals) const {
     const Eigen::Map<const Eigen::Matrix<T, 3, 1>> a(point_a);
     const Eigen::Map<const Eigen::Matrix<T, 3, 1>> b(point_b);
-    const Eigen::Map<const Eigen::Quaternion<T>> rotation(cam_from_world_rotation);
-    const Eigen::Map<const Eigen::Matrix<T, 3, 1>> translation(cam_from_world_translation);
+    const Eigen::Map<const Eigen::Quaternion<T>> rotation(cam_from_world);
+    const Eigen::Map<const Eigen::Matrix<T, 3, 1>> translation(cam_from_world + 4);
     const Eigen::Matrix<T, 3, 1> midpoint = T(0.5) * (a + b);
     const T depth = (rotation * midpoint).z() + translation.z();
     if (!(depth > T(0))) return false;

@@ -2,8 +2,8 @@
 // Pose-graph term: the relative pose b_from_a = cam_b_from_world * inverse(cam_a_from_world)
 // of two images should equal a measured one.
 //
-// Parameter blocks: cam_a_from_world rotation (4, Eigen x, y, z, w), translation (3),
-// cam_b_from_world rotation (4), translation (3).
+// Parameter blocks: cam_a_from_world (7: Eigen quaternion x, y, z, w, then the translation;
+// the bundle's pose block, see reprojection_error.h), cam_b_from_world (7).
 // Residuals (6): sqrt_information * [rotation error; translation error], where the rotation
 // error is the angle-axis vector (small-angle: 2 * vec) of inverse(measured) * estimated
 // and the translation error is estimated - measured translation of b_from_a.
@@ -27,17 +27,16 @@ class RelativePoseCost {
   static ceres::CostFunction* Create(const Rigid3d& measured_b_from_a,
                                      const Eigen::Matrix<double, 6, 6>& sqrt_information =
                                          Eigen::Matrix<double, 6, 6>::Identity()) {
-    return new ceres::AutoDiffCostFunction<RelativePoseCost, 6, 4, 3, 4, 3>(
+    return new ceres::AutoDiffCostFunction<RelativePoseCost, 6, 7, 7>(
         new RelativePoseCost(measured_b_from_a, sqrt_information));
   }
 
   template <typename T>
-  bool operator()(const T* a_rotation, const T* a_translation, const T* b_rotation,
-                  const T* b_translation, T* residuals) const {
-    const Eigen::Map<const Eigen::Quaternion<T>> qa(a_rotation);
-    const Eigen::Map<const Eigen::Quaternion<T>> qb(b_rotation);
-    const Eigen::Map<const Eigen::Matrix<T, 3, 1>> ta(a_translation);
-    const Eigen::Map<const Eigen::Matrix<T, 3, 1>> tb(b_translation);
+  bool operator()(const T* cam_a_from_world, const T* cam_b_from_world, T* residuals) const {
+    const Eigen::Map<const Eigen::Quaternion<T>> qa(cam_a_from_world);
+    const Eigen::Map<const Eigen::Quaternion<T>> qb(cam_b_from_world);
+    const Eigen::Map<const Eigen::Matrix<T, 3, 1>> ta(cam_a_from_world + 4);
+    const Eigen::Map<const Eigen::Matrix<T, 3, 1>> tb(cam_b_from_world + 4);
     const Eigen::Quaternion<T> b_from_a_rotation = qb * qa.conjugate();
     const Eigen::Matrix<T, 3, 1> b_from_a_translation = tb - b_from_a_rotation * ta;
 

@@ -3,11 +3,14 @@
 // automatic differentiation. Residuals are in pixels: projected - observed.
 //
 // Parameter blocks, in order:
-//   cam_from_world rotation   4  Eigen quaternion coefficients (x, y, z, w); use
-//                                ceres::EigenQuaternionManifold and keep it unit norm
-//   cam_from_world translation 3
+//   cam_from_world            7  Eigen quaternion coefficients (x, y, z, w), then the
+//                                translation (PoseParameters in rigid3.h); use
+//                                PoseManifold() and keep the quaternion unit norm
 //   point3D_in_world          3
 //   camera params             Model::kNumParams, in the model's order (see kParamsInfo)
+// One pose block, not a rotation and a translation: Ceres' Schur complement then has one
+// 6x6 block per pair of co-observing images instead of four 3x3 ones, a quarter of the
+// block look-ups and locks when the points are eliminated (SchurEliminator<2, 3, 6>).
 // The constant-pose variant stores cam_from_world and has only the last two blocks; the
 // constant-camera variants store the camera parameters and drop the last block. A constant
 // block is cheaper as data than as a constant parameter block: automatic differentiation
@@ -69,16 +72,16 @@ class ReprojectionErrorAutoDiff {
   explicit ReprojectionErrorAutoDiff(const Eigen::Vector2d& observed) : observed_(observed) {}
 
   static ceres::CostFunction* Create(const Eigen::Vector2d& observed) {
-    return new ceres::AutoDiffCostFunction<ReprojectionErrorAutoDiff, 2, 4, 3, 3,
+    return new ceres::AutoDiffCostFunction<ReprojectionErrorAutoDiff, 2, 7, 3,
                                            CameraModel::kNumParams>(
         new ReprojectionErrorAutoDiff(observed));
   }
 
   template <typename T>
-  bool operator()(const T* cam_from_world_rotation, const T* cam_from_world_translation,
-                  const T* point3D_in_world, const T* camera_params, T* residuals) const {
-    const Eigen::Map<const Eigen::Quaternion<T>> rotation(cam_from_world_rotation);
-    const Eigen::Map<const Eigen::Matrix<T, 3, 1>> translation(cam_from_world_translation);
+  bool operator()(const T* cam_from_world, const T* point3D_in_world, const T* camera_params,
+                  T* residuals) const {
+    const Eigen::Map<const Eigen::Quaternion<T>> rotation(cam_from_world);
+    const Eigen::Map<const Eigen::Matrix<T, 3, 1>> translation(cam_from_world + 4);
     const Eigen::Map<const Eigen::Matrix<T, 3, 1>> point(point3D_in_world);
     ProjectionResidual<CameraModel, T>(camera_params, rotation * point + translation, observed_,
                                        residuals);
@@ -95,37 +98,34 @@ class ReprojectionErrorAutoDiff {
 // derivatives of all ten pose and point parameters through the rotation.)
 class PointInCameraWithDerivatives {
  public:
-  PointInCameraWithDerivatives(const double* rotation, const double* translation,
-                               const double* point)
-      : u_(rotation), w_(rotation[3]), point_(point), u_cross_point_(u_.cross(point_)) {
+  // cam_from_world: the 7 pose parameters (quaternion x, y, z, w, then translation).
+  PointInCameraWithDerivatives(const double* cam_from_world, const double* point)
+      : u_(cam_from_world), w_(cam_from_world[3]), point_(point), u_cross_point_(u_.cross(point_)) {
     point_in_cam_ = point_ + 2.0 * (w_ * u_cross_point_ + u_.cross(u_cross_point_)) +
-                    Eigen::Map<const Eigen::Vector3d>(translation);
+                    Eigen::Map<const Eigen::Vector3d>(cam_from_world + 4);
   }
 
   const Eigen::Vector3d& point_in_cam() const { return point_in_cam_; }
 
-  // Chain rule: from d residual / d p (2x3) to the rotation, translation and point blocks
-  // (jacobians[0..2], Ceres' row-major layout; a null entry is skipped).
+  // Chain rule: from d residual / d p (2x3) to the pose and point blocks (jacobians[0..1],
+  // Ceres' row-major layout; a null entry is skipped).
   void Chain(const Eigen::Matrix<double, 2, 3, Eigen::RowMajor>& d_projected,
              double** jacobians) const {
     if (jacobians[0] != nullptr) {
+      Eigen::Map<Eigen::Matrix<double, 2, 7, Eigen::RowMajor>> d_pose(jacobians[0]);
       // d p / d u = 2 (-w [X]x + (u.X) I - 2 X u^T + u X^T);  d p / d w = 2 (u x X).
       Eigen::Matrix<double, 3, 4> d_rotation;
       d_rotation.leftCols<3>() =
           2.0 * (-w_ * CrossMatrix(point_) + u_.dot(point_) * Eigen::Matrix3d::Identity() -
                  2.0 * point_ * u_.transpose() + u_ * point_.transpose());
       d_rotation.col(3) = 2.0 * u_cross_point_;
-      Eigen::Map<Eigen::Matrix<double, 2, 4, Eigen::RowMajor>> d_q(jacobians[0]);
-      d_q = d_projected * d_rotation;
+      d_pose.leftCols<4>() = d_projected * d_rotation;
+      d_pose.rightCols<3>() = d_projected;
     }
     if (jacobians[1] != nullptr) {
-      Eigen::Map<Eigen::Matrix<double, 2, 3, Eigen::RowMajor>> d_t(jacobians[1]);
-      d_t = d_projected;
-    }
-    if (jacobians[2] != nullptr) {
       // d p / d X = I + 2 w [u]x + 2 [u]x [u]x (the rotation matrix when |q| = 1).
       const Eigen::Matrix3d u_cross = CrossMatrix(u_);
-      Eigen::Map<Eigen::Matrix<double, 2, 3, Eigen::RowMajor>> d_x(jacobians[2]);
+      Eigen::Map<Eigen::Matrix<double, 2, 3, Eigen::RowMajor>> d_x(jacobians[1]);
       d_x = d_projected *
           (Eigen::Matrix3d::Identity() + 2.0 * w_ * u_cross + 2.0 * u_cross * u_cross);
     }
@@ -152,7 +152,7 @@ class PointInCameraWithDerivatives {
 // the whole cost carries 14), the pose and point ones from PointInCameraWithDerivatives.
 template <typename CameraModel>
 class ReprojectionErrorCost
-    : public ceres::SizedCostFunction<2, 4, 3, 3, CameraModel::kNumParams> {
+    : public ceres::SizedCostFunction<2, 7, 3, CameraModel::kNumParams> {
  public:
   explicit ReprojectionErrorCost(const Eigen::Vector2d& observed) : observed_(observed) {}
 
@@ -162,8 +162,8 @@ class ReprojectionErrorCost
 
   bool Evaluate(double const* const* parameters, double* residuals,
                 double** jacobians) const override {
-    const PointInCameraWithDerivatives posed(parameters[0], parameters[1], parameters[2]);
-    const double* camera_params = parameters[3];
+    const PointInCameraWithDerivatives posed(parameters[0], parameters[1]);
+    const double* camera_params = parameters[2];
     if (jacobians == nullptr) {
       ProjectionResidual<CameraModel, double>(camera_params, posed.point_in_cam(), observed_,
                                               residuals);
@@ -182,8 +182,8 @@ class ReprojectionErrorCost
     for (int r = 0; r < 2; ++r) {
       residuals[r] = projected[r].a;
       d_projected.row(r) = projected[r].v.template head<3>().transpose();
-      if (jacobians[3] != nullptr) {
-        Eigen::Map<Eigen::Matrix<double, 1, kNumParams>> d_camera(jacobians[3] + r * kNumParams);
+      if (jacobians[2] != nullptr) {
+        Eigen::Map<Eigen::Matrix<double, 1, kNumParams>> d_camera(jacobians[2] + r * kNumParams);
         d_camera = projected[r].v.template tail<kNumParams>().transpose();
       }
     }
@@ -202,7 +202,7 @@ class ReprojectionErrorCost
 // differentiation of the same expression (to rounding), in about a third of the time: a
 // 10-component Jet through the rotation is what it replaces.
 template <typename CameraModel>
-class ReprojectionErrorConstantCameraCost : public ceres::SizedCostFunction<2, 4, 3, 3> {
+class ReprojectionErrorConstantCameraCost : public ceres::SizedCostFunction<2, 7, 3> {
  public:
   ReprojectionErrorConstantCameraCost(const std::vector<double>& camera_params,
                                       const Eigen::Vector2d& observed)
@@ -215,7 +215,7 @@ class ReprojectionErrorConstantCameraCost : public ceres::SizedCostFunction<2, 4
 
   bool Evaluate(double const* const* parameters, double* residuals,
                 double** jacobians) const override {
-    const PointInCameraWithDerivatives posed(parameters[0], parameters[1], parameters[2]);
+    const PointInCameraWithDerivatives posed(parameters[0], parameters[1]);
     if (jacobians == nullptr) {
       ProjectionResidual<CameraModel, double>(camera_.template As<double>().data(),
                                               posed.point_in_cam(), observed_, residuals);
