@@ -417,7 +417,7 @@ void BundleAdjuster::ParameterizeCameras() {
   }
 }
 
-bool BundleAdjuster::HasPoseBlocks(image_t image_id) const {
+bool BundleAdjuster::HasPoseBlock(image_t image_id) const {
   return pose_blocks_.count(image_id) > 0;
 }
 

@@ -222,7 +222,7 @@ class BundleAdjuster {
   double* CameraBlock(camera_t camera_id);    // Model::kNumParams
   // Whether a pose's block is in the problem. Poses held constant by the config get
   // constant-pose reprojection terms and no block until PoseBlock asks for it.
-  bool HasPoseBlocks(image_t image_id) const;
+  bool HasPoseBlock(image_t image_id) const;
 
   const BundleAdjustmentReport& report() const { return report_; }
   // Ceres' full report, for logging.

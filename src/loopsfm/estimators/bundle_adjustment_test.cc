@@ -568,7 +568,7 @@ TEST(BundleAdjustment, PoseGraphThroughBlockAccessors) {
   Perturb(&reconstruction, {1}, 2.0, 0.2, 0.0, 18);
   BundleAdjuster adjuster(BundleAdjustmentOptions::Global(), BundleAdjustmentConfig());
   adjuster.SetUp(&reconstruction);
-  EXPECT_FALSE(adjuster.HasPoseBlocks(1));
+  EXPECT_FALSE(adjuster.HasPoseBlock(1));
   const std::vector<image_t> ids = truth.RegImageIds();
   for (size_t i = 0; i < ids.size(); ++i) {
     const image_t a = ids[i];
