@@ -194,16 +194,35 @@ DriftCorrection MeasureCorrection(const Reconstruction& reconstruction, const Ma
                                   const Sim3d& old_from_recent, image_t recent_frame,
                                   int old_index, int recent_index,
                                   const LoopClosureOptions& options) {
+  constexpr int kTurningStride = 10;  // captures between the frames whose angle is summed
   double path = 0.0;
+  double turning_deg = 0.0;
   const Image* previous = nullptr;
-  for (int k = std::max(old_index, 0);
-       k <= recent_index && k < static_cast<int>(input.frames.size()); ++k) {
+  const Image* anchor = nullptr;  // last frame the turning was summed to
+  int anchor_index = 0;
+  const int end = std::min(recent_index, static_cast<int>(input.frames.size()) - 1);
+  for (int k = std::max(old_index, 0); k <= end; ++k) {
     const Image& image = reconstruction.GetImage(input.frames[k].image_id);
     if (!image.registered) continue;
     if (previous) path += (image.ProjectionCenter() - previous->ProjectionCenter()).norm();
     previous = &image;
+    if (!anchor) {
+      anchor = &image;
+      anchor_index = k;
+    } else if (k - anchor_index >= kTurningStride) {
+      turning_deg += RotationAngleDegrees(image.cam_from_world.rotation *
+                                          anchor->cam_from_world.rotation.inverse());
+      anchor = &image;
+      anchor_index = k;
+    }
+  }
+  if (anchor && previous != anchor) {
+    turning_deg += RotationAngleDegrees(previous->cam_from_world.rotation *
+                                        anchor->cam_from_world.rotation.inverse());
   }
   DriftCorrection correction;
+  correction.turning_deg = turning_deg;
+  correction.rotation_deg = RotationAngleDegrees(old_from_recent.rotation);
   const Eigen::Vector3d centre = reconstruction.GetImage(recent_frame).ProjectionCenter();
   correction.translation = (old_from_recent * centre - centre).norm();
   correction.fraction_of_path =
@@ -293,6 +312,20 @@ bool LoopCloser::DetectAndClose(MapperState& model, image_t image_id, MapperRepo
     return false;
   }
 
+  const Camera& camera = rec.GetCamera(rec.GetImage(image_id).camera_id);
+  const bool focal_fixed =
+      camera.has_prior_focal_length && !model.options().refine_known.focal_length;
+  if (focal_fixed && correction.SuggestsWrongIntrinsics() && !warned_intrinsics_) {
+    warned_intrinsics_ = true;
+    spdlog::warn("loop: the correction turns the recent end by {:.1f} deg, {:.1f} % of the "
+                 "{:.0f} deg the camera turned between the two ends. Intrinsics that are off "
+                 "do this (a focal length e % off can measure turns up to about e % wrong), and "
+                 "closing loops cannot undo it: the given intrinsics are held fixed. If they "
+                 "are not exact, run again with --refine focal (or without --intrinsics)",
+                 correction.rotation_deg, 100.0 * correction.rotation_deg / correction.turning_deg,
+                 correction.turning_deg);
+  }
+
   // Loop edges, one per registration of the window: between the old frame that sees most
   // of its inlier old points and the recent frame that sees most of their recent partners.
   std::vector<std::pair<image_t, image_t>> loop_edges;
@@ -345,7 +378,7 @@ bool LoopCloser::DetectAndClose(MapperState& model, image_t image_id, MapperRepo
   loop.num_inliers = alignment.num_inliers;
   loop.correction_translation = translation;
   loop.correction_fraction_of_path = fraction;
-  loop.correction_rotation_deg = RotationAngleDegrees(old_from_recent.rotation);
+  loop.correction_rotation_deg = correction.rotation_deg;
   loop.correction_scale = scale;
   loop.num_points_before = static_cast<long long>(rec.NumPoints3D());
   loop.num_points_after = loop.num_points_before;

@@ -193,6 +193,56 @@ TEST(LoopCloser, CorrectionOfSeveralLapsOfScaleDriftIsPlausible) {
   EXPECT_FALSE(look_alike.plausible);
 }
 
+// How far the camera turned between a loop's ends, and when a loop's rotation is too large
+// a share of it to be drift: the walk turning 3 deg per frame about its vertical axis, with
+// 0.5 deg of shake about the horizontal one alternating frame to frame.
+TEST(LoopCloser, CorrectionRotationIsMeasuredAgainstTheTurning) {
+  const MapperProblem p = WalkOutAndBack();
+  MapperState state(p.input, LoopOptions());
+  RegisterWithDrift(p, state, 0.0);
+  Reconstruction& rec = state.reconstruction();
+  const int last = static_cast<int>(p.input.frames.size()) - 1;
+  auto turn_walk = [&](double degrees_per_frame) {
+    for (int i = 0; i <= last; ++i) {
+      Image& image = rec.GetImage(p.input.frames[i].image_id);
+      const Eigen::Vector3d centre = image.ProjectionCenter();
+      const Eigen::Quaterniond world_from_cam =
+          Eigen::AngleAxisd(degrees_per_frame * i * M_PI / 180.0, Eigen::Vector3d::UnitY()) *
+          Eigen::AngleAxisd((i % 2 ? 0.5 : -0.5) * M_PI / 180.0, Eigen::Vector3d::UnitX());
+      image.cam_from_world.rotation = world_from_cam.inverse();
+      image.cam_from_world.translation = -(image.cam_from_world.rotation * centre);
+    }
+  };
+  const image_t recent = p.input.frames[last].image_id;
+  auto rotated = [](double degrees) {
+    Sim3d old_from_recent;
+    old_from_recent.rotation =
+        Eigen::AngleAxisd(degrees * M_PI / 180.0, Eigen::Vector3d::UnitY());
+    return old_from_recent;
+  };
+  const LoopClosureOptions defaults;
+  turn_walk(3.0);
+  // 79 steps of 3 deg; shake summed frame by frame would add up to about 79 deg more.
+  const DriftCorrection focal_off = MeasureCorrection(rec, p.input, rotated(6.0), recent, 0, last, defaults);
+  EXPECT_NEAR(focal_off.turning_deg, 237.0, 2.0);
+  EXPECT_NEAR(focal_off.rotation_deg, 6.0, 1e-9);
+  EXPECT_TRUE(focal_off.SuggestsWrongIntrinsics());
+  // Two degrees over 237 are drift.
+  EXPECT_FALSE(MeasureCorrection(rec, p.input, rotated(2.0), recent, 0, last, defaults)
+                   .SuggestsWrongIntrinsics());
+  // Six degrees where the camera hardly turned: no focal length explains that.
+  turn_walk(0.5);
+  const DriftCorrection straight = MeasureCorrection(rec, p.input, rotated(6.0), recent, 0, last, defaults);
+  EXPECT_NEAR(straight.turning_deg, 39.5, 1.0);
+  EXPECT_FALSE(straight.SuggestsWrongIntrinsics());
+  // Unregistered frames are skipped, the last one included.
+  rec.DeRegisterImage(recent);
+  EXPECT_NEAR(MeasureCorrection(rec, p.input, rotated(6.0), p.input.frames[last - 1].image_id, 0,
+                                last, defaults)
+                  .turning_deg,
+              39.0, 1.0);
+}
+
 // The alternate pose diagnostic: a frame at the end of the drifted walk back sees each
 // track's old point (where the first frames put it) and its recent one (where the drifted
 // walk back put it); registered again, one pose fits one end and a second RANSAC over the
