@@ -64,8 +64,9 @@ struct DriftCorrection {
   bool plausible = false;
   // A rotation that large a share of the turning is what intrinsics that are off make: a
   // focal length e % off can measure turns up to about e % short or long, and a lap's turns
-  // add up (drift2, focal 5 % short: 18.6 deg over 411 deg). Drift alone stays well under
-  // that (block.mp4 with its focal 4 % long, in-place turns: 1.3 to 2.0 deg over 360 deg).
+  // add up (drift2, focal 5 % short: 18.6 deg over 411 deg). Other drift stays well under
+  // that, and so may a wrong focal length where the turns are made in place (block.mp4,
+  // focal 4 % long: 1.3 to 2.0 deg over 360 deg, no warning).
   bool SuggestsWrongIntrinsics() const {
     return turning_deg >= 90.0 && rotation_deg >= 0.02 * turning_deg;
   }
