@@ -85,7 +85,7 @@ int Main(int argc, char** argv) {
   struct Variant {
     std::string name;
     BundleLinearSolver solver;
-    // Hold the second gauge frame's whole translation (over-fixing the gauge by two
+    // Hold the second gauge frame's whole centre (over-fixing the gauge by two
     // coordinates) by three priors instead of one, to check that the gauge prior costs
     // nothing (every pose block keeps tangent size 6, for Ceres' fixed-size Schur kernel; a
     // SubsetManifold would not, and was 16 % slower).
@@ -104,7 +104,7 @@ int Main(int argc, char** argv) {
       for (const image_t id : frames) config.AddImage(id);
       for (const auto& [id, camera] : rec.Cameras()) config.SetConstantCamera(id);
       FixGaugeWithTwoImages(rec, frames[0], frames[1], &config);
-      if (full_gauge_block) config.SetConstantTranslationCoords(frames[1], {0, 1, 2});
+      if (full_gauge_block) config.SetConstantCentreCoords(frames[1], {0, 1, 2});
       BundleAdjustmentOptions options = BundleAdjustmentOptions::Global();
       options.linear_solver = solver;
       options.num_threads = threads > 0 ? threads : -1;

@@ -5,10 +5,11 @@
 #include <optional>
 #include <thread>
 
+#include <ceres/autodiff_cost_function.h>
 #include <ceres/manifold.h>
-#include <ceres/product_manifold.h>
 
 #include "loopsfm/estimators/bundle_settled.h"
+#include "loopsfm/estimators/pose_manifold.h"
 #include "loopsfm/estimators/cost_functions/reprojection_error.h"
 #include "loopsfm/util/errors.h"
 
@@ -100,32 +101,40 @@ class CameraParamsManifold : public ceres::Manifold {
   std::vector<int> free_;
 };
 
-// Holds one coordinate of a pose's translation at its start value:
-// r = weight * (t[c] - t0[c]) on the 7-parameter pose block. Used instead of a manifold
-// holding the coordinate for the scale gauge, so that the pose block keeps tangent size 6:
-// with every pose block of one size, Ceres picks its fixed-size Schur kernel
-// (SchurEliminator<2, 3, 6>; with separate rotation and translation blocks a SubsetManifold
-// was measured 16 % slower on block.mp4's global bundle, bench/bundle_adjustment). The data
-// cannot move the gauge, so at the optimum the prior is zero and the solution is the one
-// the hard constraint gives.
-class TranslationCoordinatePrior final : public ceres::SizedCostFunction<1, 7> {
- public:
-  TranslationCoordinatePrior(int coord, double value, double weight)
-      : coord_(coord), value_(value), weight_(weight) {}
-  bool Evaluate(double const* const* parameters, double* residuals,
-                double** jacobians) const override {
-    residuals[0] = weight_ * (parameters[0][4 + coord_] - value_);
-    if (jacobians != nullptr && jacobians[0] != nullptr) {
-      for (int i = 0; i < 7; ++i) jacobians[0][i] = i == 4 + coord_ ? weight_ : 0.0;
-    }
+// Holds one coordinate of a pose's projection centre at its start value:
+// r = weight * (c[k] - c0[k]) with c = -R^T t, on the 7-parameter pose block (quaternion
+// coefficients x, y, z, w, then t). A prior rather than a manifold, so that the pose block
+// keeps tangent size 6: with every pose block of one size, Ceres picks its fixed-size Schur
+// kernel (SchurEliminator<2, 3, 6>; a SubsetManifold was measured 16 % slower on block.mp4's
+// global bundle, bench/bundle_adjustment). The data cannot move the gauge, so at the optimum
+// the prior is zero and the solution is the one the hard constraint gives.
+struct CentreCoordinatePrior {
+  template <typename T>
+  bool operator()(const T* pose, T* residual) const {
+    const Eigen::Map<const Eigen::Quaternion<T>> rotation(pose);
+    const Eigen::Map<const Eigen::Matrix<T, 3, 1>> translation(pose + 4);
+    const Eigen::Matrix<T, 3, 1> centre = -(rotation.conjugate() * translation);
+    residual[0] = T(weight) * (centre[coord] - T(value));
     return true;
   }
-
- private:
-  int coord_;
-  double value_;
-  double weight_;
+  int coord;
+  double value;
+  double weight;
 };
+
+// RMS distance of the images' centres from their mean; 1 where that is 0 (one image, or all
+// at one place), so that it can serve as a length unit.
+double CentreSpread(const Reconstruction& reconstruction, const std::vector<image_t>& image_ids) {
+  Eigen::Vector3d mean = Eigen::Vector3d::Zero();
+  for (const image_t id : image_ids) mean += reconstruction.GetImage(id).ProjectionCenter();
+  mean /= std::max<double>(1.0, static_cast<double>(image_ids.size()));
+  double sum = 0.0;
+  for (const image_t id : image_ids) {
+    sum += (reconstruction.GetImage(id).ProjectionCenter() - mean).squaredNorm();
+  }
+  const double spread = std::sqrt(sum / std::max<double>(1.0, static_cast<double>(image_ids.size())));
+  return spread > 0.0 ? spread : 1.0;
+}
 
 std::optional<ceres::SparseLinearAlgebraLibraryType> AvailableSparseLibrary() {
   for (const auto type : {ceres::SUITE_SPARSE, ceres::EIGEN_SPARSE, ceres::CX_SPARSE}) {
@@ -185,20 +194,19 @@ void BundleAdjustmentOptions::Check() const {
 void BundleAdjustmentConfig::RemoveImage(image_t image_id) {
   image_ids_.erase(image_id);
   constant_poses_.erase(image_id);
-  constant_translation_.erase(image_id);
+  constant_centre_.erase(image_id);
 }
 
-void BundleAdjustmentConfig::SetConstantTranslationCoords(image_t image_id,
-                                                          std::vector<int> coords) {
+void BundleAdjustmentConfig::SetConstantCentreCoords(image_t image_id, std::vector<int> coords) {
   std::sort(coords.begin(), coords.end());
   coords.erase(std::unique(coords.begin(), coords.end()), coords.end());
-  for (const int c : coords) LOOPSFM_CHECK_MSG(c >= 0 && c < 3, "translation coord {}", c);
-  constant_translation_[image_id] = std::move(coords);
+  for (const int c : coords) LOOPSFM_CHECK_MSG(c >= 0 && c < 3, "centre coord {}", c);
+  constant_centre_[image_id] = std::move(coords);
 }
 
-const std::vector<int>* BundleAdjustmentConfig::ConstantTranslationCoords(image_t image_id) const {
-  const auto it = constant_translation_.find(image_id);
-  return it == constant_translation_.end() ? nullptr : &it->second;
+const std::vector<int>* BundleAdjustmentConfig::ConstantCentreCoords(image_t image_id) const {
+  const auto it = constant_centre_.find(image_id);
+  return it == constant_centre_.end() ? nullptr : &it->second;
 }
 
 void BundleAdjustmentConfig::AddVariablePoint(point3D_t point3D_id) {
@@ -217,12 +225,12 @@ void FixGaugeWithTwoImages(const Reconstruction& reconstruction, image_t first_i
   const Image& first = reconstruction.GetImage(first_image_id);
   const Image& second = reconstruction.GetImage(second_image_id);
   // With the first pose fixed, the remaining gauge freedom is a scaling about the first
-  // centre C1, which moves the second translation along (cam2_from_world * C1).
-  const Eigen::Vector3d direction = second.cam_from_world * first.ProjectionCenter();
+  // centre C1, which moves the second centre along the baseline C2 - C1.
+  const Eigen::Vector3d baseline = second.ProjectionCenter() - first.ProjectionCenter();
   int coord = 0;
-  direction.cwiseAbs().maxCoeff(&coord);
+  baseline.cwiseAbs().maxCoeff(&coord);
   config->SetConstantPose(first_image_id);
-  config->SetConstantTranslationCoords(second_image_id, {coord});
+  config->SetConstantCentreCoords(second_image_id, {coord});
 }
 
 BundleAdjuster::BundleAdjuster(const BundleAdjustmentOptions& options,
@@ -250,6 +258,7 @@ void BundleAdjuster::SetUp(Reconstruction* reconstruction) {
   loss_function_ = CreateLossFunction(options_.loss_function, options_.loss_function_scale);
 
   const std::vector<image_t> image_ids = Sorted(config_.ImageIds());
+  centre_spread_ = CentreSpread(*reconstruction_, image_ids);
   for (const image_t image_id : image_ids) AddImage(image_id);
 
   // Points seen by the config's images, and those the config adds explicitly, enter with
@@ -281,33 +290,22 @@ void BundleAdjuster::AddPoseBlocks(image_t image_id) {
   Image& image = reconstruction_->GetImage(image_id);
   image.cam_from_world.rotation.normalize();
   double* pose = PoseParameters(image.cam_from_world);
-  const std::vector<int>* coords = config_.ConstantTranslationCoords(image_id);
-  const double norm = image.cam_from_world.translation.norm();
   const bool constant = config_.HasConstantPose(image_id);
-  if (!constant && coords != nullptr && norm < 1e-9) {
-    // The prior's weight needs a length: hold the coordinates by the manifold (a tangent
-    // size other than 6 for this one block, so Ceres' general Schur kernel).
-    problem_->AddParameterBlock(
-        pose, 7,
-        new ceres::ProductManifold<ceres::EigenQuaternionManifold, ceres::SubsetManifold>(
-            ceres::EigenQuaternionManifold(), ceres::SubsetManifold(3, *coords)));
-    return;
-  }
-  problem_->AddParameterBlock(
-      pose, 7,
-      new ceres::ProductManifold<ceres::EigenQuaternionManifold, ceres::EuclideanManifold<3>>(
-          ceres::EigenQuaternionManifold(), ceres::EuclideanManifold<3>()));
+  problem_->AddParameterBlock(pose, 7, new PoseCentreManifold);
   if (constant) {
     problem_->SetParameterBlockConstant(pose);
     return;
   }
-  if (coords != nullptr) {
-    // A step of 1e-6 of the translation's length costs a pixel.
-    const double weight = 1e6 / norm;
-    for (const int c : *coords) {
-      problem_->AddResidualBlock(new TranslationCoordinatePrior(c, pose[4 + c], weight),
-                                 nullptr, pose);
-    }
+  const std::vector<int>* coords = config_.ConstantCentreCoords(image_id);
+  if (coords == nullptr) return;
+  // A step of 1e-6 of the cameras' spread costs a pixel.
+  const double weight = 1e6 / centre_spread_;
+  const Eigen::Vector3d centre = image.ProjectionCenter();
+  for (const int c : *coords) {
+    problem_->AddResidualBlock(
+        new ceres::AutoDiffCostFunction<CentreCoordinatePrior, 1, 7>(
+            new CentreCoordinatePrior{c, centre[c], weight}),
+        nullptr, pose);
   }
 }
 

@@ -115,13 +115,17 @@ class BundleAdjustmentConfig {
   void SetVariablePose(image_t image_id) { constant_poses_.erase(image_id); }
   bool HasConstantPose(image_t image_id) const { return constant_poses_.count(image_id) > 0; }
 
-  // Fixes some coordinates (0, 1, 2) of an image's cam_from_world translation, e.g. one of
-  // the second image of a two-view start to fix the scale gauge. All three make the block
-  // constant; fewer are held by a stiff prior (a step of 1e-6 of the translation's length
-  // costs a pixel), which keeps the block's size and so Ceres' fixed-size Schur kernel.
-  void SetConstantTranslationCoords(image_t image_id, std::vector<int> coords);
-  void RemoveConstantTranslationCoords(image_t image_id) { constant_translation_.erase(image_id); }
-  const std::vector<int>* ConstantTranslationCoords(image_t image_id) const;
+  // Holds some coordinates (0, 1, 2) of an image's projection centre (world frame) at their
+  // start values, e.g. one of the second gauge image's to fix the scale; the rotation stays
+  // free. Held by a stiff prior (a step of 1e-6 of the config's camera spread costs a pixel),
+  // which keeps the pose block's size and so Ceres' fixed-size Schur kernel. The centre, not
+  // the translation t = -R c: t also moves when the image turns, by as much as the world's
+  // origin is far away, so holding a coordinate of t lets a slight turn of the second image
+  // stand in for a change of scale (after mapping, block.mp4's gauge images lay 50 units from
+  // the origin, and a bundle after a loop closing grew the model 7x in 100 iterations).
+  void SetConstantCentreCoords(image_t image_id, std::vector<int> coords);
+  void RemoveConstantCentreCoords(image_t image_id) { constant_centre_.erase(image_id); }
+  const std::vector<int>* ConstantCentreCoords(image_t image_id) const;
 
   // Adds a point with all its observations by registered images, even if none of its
   // images is in the config (their poses are then constant).
@@ -155,7 +159,7 @@ class BundleAdjustmentConfig {
  private:
   std::unordered_set<image_t> image_ids_;
   std::unordered_set<image_t> constant_poses_;
-  std::unordered_map<image_t, std::vector<int>> constant_translation_;
+  std::unordered_map<image_t, std::vector<int>> constant_centre_;
   std::unordered_set<point3D_t> variable_points_;
   std::unordered_set<point3D_t> constant_points_;
   std::unordered_set<camera_t> constant_cameras_;
@@ -163,8 +167,8 @@ class BundleAdjustmentConfig {
 };
 
 // Fixes the seven-degree-of-freedom gauge of a reconstruction through two of its images:
-// the first image's pose is constant and the translation coordinate of the second that
-// best fixes the scale (its largest component of the first centre in the second's frame).
+// the first image's pose is constant, and the coordinate of the second's centre that best
+// fixes the scale (the largest component of the baseline between the two centres).
 void FixGaugeWithTwoImages(const Reconstruction& reconstruction, image_t first_image_id,
                            image_t second_image_id, BundleAdjustmentConfig* config);
 
@@ -250,6 +254,8 @@ class BundleAdjuster {
   // Shared by all reprojection residuals; owned by the problem.
   ceres::LossFunction* loss_function_ = nullptr;
   std::unordered_set<image_t> pose_blocks_;
+  // Length unit of the centre priors (CentreSpread of the config's images).
+  double centre_spread_ = 1.0;
   std::unordered_set<point3D_t> points_added_;
   std::unordered_set<camera_t> cameras_added_;
   // Cameras used by images of the config: the ones whose intrinsics may be refined.

@@ -210,15 +210,17 @@ BundleAdjustmentConfig GaugeFixedConfig(const Reconstruction& truth) {
   return config;
 }
 
-// Perturbs the second gauge image everywhere except its fixed translation coordinate.
-void PerturbSecondGaugeImage(Reconstruction* reconstruction, int fixed_coord) {
+// Perturbs the second gauge image everywhere except its held centre coordinate.
+void PerturbSecondGaugeImage(Reconstruction* reconstruction, int held_coord) {
   Random random(99);
   Image& image = reconstruction->GetImage(2);
+  Eigen::Vector3d centre = image.ProjectionCenter();
+  for (int c = 0; c < 3; ++c) {
+    if (c != held_coord) centre[c] += 0.03;
+  }
   image.cam_from_world.rotation =
       (SmallRotation(random, 0.7) * image.cam_from_world.rotation).normalized();
-  for (int c = 0; c < 3; ++c) {
-    if (c != fixed_coord) image.cam_from_world.translation[c] += 0.03;
-  }
+  image.cam_from_world.translation = -(image.cam_from_world.rotation * centre);
 }
 
 class BundleAdjustmentModelTest : public ::testing::TestWithParam<CameraModelId> {};
@@ -228,7 +230,7 @@ TEST_P(BundleAdjustmentModelTest, NoiselessSceneIsRecoveredExactly) {
   const BundleAdjustmentConfig config = GaugeFixedConfig(truth);
   Reconstruction reconstruction = truth;
   Perturb(&reconstruction, {1, 2}, 0.8, 0.03, 0.03, 2);
-  PerturbSecondGaugeImage(&reconstruction, config.ConstantTranslationCoords(2)->front());
+  PerturbSecondGaugeImage(&reconstruction, config.ConstantCentreCoords(2)->front());
   ASSERT_GT(MeanReprojectionError(reconstruction), 1.0);
 
   BundleAdjuster adjuster(BundleAdjustmentOptions::Global(), config);
@@ -461,7 +463,7 @@ TEST(BundleAdjustment, RestrictedToSomePointsLeavesTheOthersOut) {
   Perturb(&reconstruction, {1}, 0.8, 0.03, 0.03, 18);
   BundleAdjustmentConfig config = AllImagesConfig(reconstruction);
   config.SetConstantPose(1);
-  config.SetConstantTranslationCoords(2, {0});
+  config.SetConstantCentreCoords(2, {0});
   std::unordered_set<point3D_t> subset;
   size_t expected_blocks = 0;
   for (const auto& [id, point] : reconstruction.Points3D()) {
@@ -630,7 +632,7 @@ TEST(BundleAdjustment, SettleToleranceEndsTheSolveOnceTheCamerasSettle) {
   BundleAdjuster settled_adjuster(options, config);
   ASSERT_TRUE(settled_adjuster.Solve(&settled)) << settled_adjuster.FullReport();
   EXPECT_TRUE(settled_adjuster.report().settled);
-  EXPECT_LE(settled_adjuster.report().num_iterations, 12);
+  EXPECT_LE(settled_adjuster.report().num_iterations, 12) << settled_adjuster.FullReport() << full_adjuster.FullReport();
   EXPECT_GT(full_adjuster.report().num_iterations, settled_adjuster.report().num_iterations);
   // Where it stopped, the poses are those of the full solve, well below the noise's effect
   // on them (a centre error of ~1e-2 against the truth, scene size ~12).
@@ -642,32 +644,35 @@ TEST(BundleAdjustment, SettleToleranceEndsTheSolveOnceTheCamerasSettle) {
   EXPECT_GT(error.max_centre, 10 * difference.max_centre);
 }
 
-// A gauge frame whose translation is zero (its centre at the world's origin) gives the
-// coordinate prior no length to scale by: the pose block then holds the coordinates through
-// its manifold, here all three (the rotation alone free), and the rest converges as usual.
-TEST(BundleAdjustment, ZeroTranslationGaugeCoordinatesAreHeldExactly) {
+// The second gauge image's held centre coordinate stays put while its rotation is corrected,
+// however far the world's origin is: the scale gauge is a length between the two gauge
+// centres, not a coordinate of t = -R c (which the image's turn alone moves, by the angle
+// times the origin's distance: 0.7 deg at about 1000 units here).
+TEST(BundleAdjustment, GaugeCentreCoordinateIsHeldFarFromTheOrigin) {
   Reconstruction truth = MakeArcScene(CameraModelId::kPinhole, 10, 300, 41);
-  const Eigen::Vector3d origin = truth.GetImage(2).ProjectionCenter();
+  const Eigen::Vector3d offset(500.0, -300.0, 800.0);  // the arc spans a few units
   for (const image_t id : truth.RegImageIds()) {
     Rigid3d& pose = truth.GetImage(id).cam_from_world;
-    pose.translation += pose.rotation * origin;
+    pose.translation -= pose.rotation * offset;
   }
-  for (auto& [id, point] : truth.Points3D()) point.xyz -= origin;
-  ASSERT_LT(truth.GetImage(2).cam_from_world.translation.norm(), 1e-12);
+  for (auto& [id, point] : truth.Points3D()) point.xyz += offset;
+  BundleAdjustmentConfig config = AllImagesConfig(truth);
+  FixGaugeWithTwoImages(truth, 1, 2, &config);
+  const int held = config.ConstantCentreCoords(2)->front();
   Reconstruction reconstruction = truth;
-  Perturb(&reconstruction, {1}, 0.8, 0.03, 0.03, 42);
-  Image& second = reconstruction.GetImage(2);
-  second.cam_from_world.translation.setZero();
-  BundleAdjustmentConfig config = AllImagesConfig(reconstruction);
-  config.SetConstantPose(1);
-  config.SetConstantTranslationCoords(2, {0, 1, 2});
+  Perturb(&reconstruction, {1, 2}, 0.8, 0.03, 0.03, 42);
+  PerturbSecondGaugeImage(&reconstruction, held);
+  const Eigen::Vector3d start = reconstruction.GetImage(2).ProjectionCenter();
+  ASSERT_NEAR(start[held], truth.GetImage(2).ProjectionCenter()[held], 1e-9);
 
   BundleAdjuster adjuster(BundleAdjustmentOptions{}, config);
   ASSERT_TRUE(adjuster.Solve(&reconstruction)) << adjuster.FullReport();
-  EXPECT_EQ(reconstruction.GetImage(2).cam_from_world.translation, Eigen::Vector3d::Zero());
+  const double spread = (truth.GetImage(2).ProjectionCenter() -
+                         truth.GetImage(1).ProjectionCenter()).norm();
+  EXPECT_NEAR(reconstruction.GetImage(2).ProjectionCenter()[held], start[held], 1e-6 * spread);
   const PoseErrors errors = ComparePoses(truth, reconstruction);
   EXPECT_LT(errors.max_rotation_deg, 1e-6);
-  EXPECT_LT(errors.max_centre, 1e-6);
+  EXPECT_LT(errors.max_centre, 1e-6 * spread);
 }
 
 TEST(BundleAdjustment, GaugeFixUsesTheLargestComponent) {
@@ -676,12 +681,12 @@ TEST(BundleAdjustment, GaugeFixUsesTheLargestComponent) {
   FixGaugeWithTwoImages(truth, 1, 12, &config);
   EXPECT_TRUE(config.HasConstantPose(1));
   EXPECT_FALSE(config.HasConstantPose(12));
-  const Eigen::Vector3d direction =
-      truth.GetImage(12).cam_from_world * truth.GetImage(1).ProjectionCenter();
+  const Eigen::Vector3d baseline =
+      truth.GetImage(12).ProjectionCenter() - truth.GetImage(1).ProjectionCenter();
   int expected = 0;
-  direction.cwiseAbs().maxCoeff(&expected);
-  ASSERT_NE(config.ConstantTranslationCoords(12), nullptr);
-  EXPECT_EQ(*config.ConstantTranslationCoords(12), std::vector<int>{expected});
+  baseline.cwiseAbs().maxCoeff(&expected);
+  ASSERT_NE(config.ConstantCentreCoords(12), nullptr);
+  EXPECT_EQ(*config.ConstantCentreCoords(12), std::vector<int>{expected});
 }
 
 TEST(BundleAdjustment, OptionsCheckRejectsBadValues) {

@@ -43,7 +43,8 @@ class MapperState {
   std::vector<point3D_t> PointsOfTrack(int track) const;
 
   // The two frames that fix the gauge (the initial pair): the first pose constant, one
-  // translation coordinate of the second constant.
+  // centre coordinate of the second constant in local bundles; global bundles hold the
+  // scale through the frame farthest from the first instead (ScaleGaugeImage).
   void SetGauge(image_t first, image_t second);
   image_t GaugeFirst() const { return gauge1_; }
   image_t GaugeSecond() const { return gauge2_; }
@@ -135,6 +136,8 @@ class MapperState {
   void RepositionPoints(const std::vector<point3D_t>& point_ids);
 
  private:
+  // The frame whose centre holds the scale in global bundles: the one farthest from gauge1_.
+  image_t ScaleGaugeImage() const;
   // Triangulates, extends or merges one track; returns observations added.
   size_t TriangulateTrack(int track);
   // Starts new points from observations of a track that fit none of its points.

@@ -135,11 +135,11 @@ bool MapperState::RegisterImage(image_t image_id, Random& random, MapperReport* 
 
 namespace {
 
-void FixGauge(image_t gauge1, image_t gauge2, BundleAdjustmentConfig* config) {
+void FixGauge(const Reconstruction& reconstruction, image_t gauge1, image_t gauge2,
+              BundleAdjustmentConfig* config) {
   if (config->HasImage(gauge1) && config->HasImage(gauge2)) {
     // The config must also have a constant image when all registered frames are in it.
-    config->SetConstantPose(gauge1);
-    config->SetConstantTranslationCoords(gauge2, {0});
+    FixGaugeWithTwoImages(reconstruction, gauge1, gauge2, config);
   } else if (config->HasImage(gauge1)) {
     config->SetConstantPose(gauge1);
   }
@@ -177,7 +177,7 @@ bool MapperState::LocalBundle(image_t image_id, MapperReport* report) {
   for (size_t i = 0; i < ranked.size() && i < static_cast<size_t>(options_.local_ba_num_images); ++i) {
     config.AddImage(ranked[i].second);
   }
-  FixGauge(gauge1_, gauge2_, &config);
+  FixGauge(reconstruction_, gauge1_, gauge2_, &config);
   for (const auto& [id, camera] : reconstruction_.Cameras()) config.SetConstantCamera(id);
   BundleAdjustmentOptions ba_options = BundleAdjustmentOptions::Local();
   ba_options.num_threads = options_.num_threads > 0 ? options_.num_threads : -1;
@@ -204,7 +204,7 @@ bool MapperState::GlobalBundle(MapperReport* report, const GlobalBundleScope& sc
   Timer timer;
   BundleAdjustmentConfig config;
   for (image_t id : reconstruction_.RegImageIds()) config.AddImage(id);
-  FixGaugeWithTwoImages(reconstruction_, gauge1_, gauge2_, &config);
+  FixGaugeWithTwoImages(reconstruction_, gauge1_, ScaleGaugeImage(), &config);
   if (scope.points) config.RestrictToPoints(*scope.points);
   BundleAdjustmentOptions ba_options = BundleAdjustmentOptions::Global();
   ba_options.num_threads = options_.num_threads > 0 ? options_.num_threads : -1;
@@ -262,6 +262,27 @@ bool MapperState::GlobalBundle(MapperReport* report, const GlobalBundleScope& sc
   ++report->num_global_ba;
   report->seconds_global_ba += timer.ElapsedSeconds();
   return ok;
+}
+
+image_t MapperState::ScaleGaugeImage() const {
+  // The second gauge frame holds the scale by its distance from the first along one axis.
+  // The initial pair's, or after mapping two consecutive frames', is a short baseline that
+  // the rest of the map holds weakly: where the frames there fit the rest badly (at a loop's
+  // seam), growing the whole model away from the pair lowers the cost a little with every
+  // step, and block.mp4's bundle after its loop closing did so for 100 iterations, the model
+  // 10x larger at the end. The registered frame farthest from the first holds the scale
+  // with the whole map's extent.
+  const Eigen::Vector3d first = reconstruction_.GetImage(gauge1_).ProjectionCenter();
+  image_t farthest = gauge2_;
+  double largest = (reconstruction_.GetImage(gauge2_).ProjectionCenter() - first).squaredNorm();
+  for (const image_t id : reconstruction_.RegImageIds()) {
+    const double distance = (reconstruction_.GetImage(id).ProjectionCenter() - first).squaredNorm();
+    if (distance > largest || (distance == largest && id < farthest)) {
+      largest = distance;
+      farthest = id;
+    }
+  }
+  return farthest;
 }
 
 void MapperState::GlobalRefinement(MapperReport* report,

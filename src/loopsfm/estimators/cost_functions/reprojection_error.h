@@ -4,9 +4,9 @@
 //
 // Parameter blocks, in order:
 //   cam_from_world            7  Eigen quaternion coefficients (x, y, z, w), then the
-//                                translation (PoseParameters in rigid3.h); use the product
-//                                of ceres::EigenQuaternionManifold and a Euclidean 3-space
-//                                (as BundleAdjuster does), keep the quaternion unit norm
+//                                translation (PoseParameters in rigid3.h); use a manifold
+//                                that keeps the quaternion unit norm (BundleAdjuster uses
+//                                PoseCentreManifold, pose_manifold.h)
 //   point3D_in_world          3
 //   camera params             Model::kNumParams, in the model's order (see kParamsInfo)
 // One pose block, not a rotation and a translation: Ceres' Schur complement then has one
