@@ -9,8 +9,8 @@
 #include <ceres/manifold.h>
 
 #include "loopsfm/estimators/bundle_settled.h"
-#include "loopsfm/estimators/pose_manifold.h"
 #include "loopsfm/estimators/cost_functions/reprojection_error.h"
+#include "loopsfm/estimators/pose_manifold.h"
 #include "loopsfm/util/errors.h"
 
 namespace loopsfm {
@@ -125,14 +125,15 @@ struct CentreCoordinatePrior {
 // RMS distance of the images' centres from their mean; 1 where that is 0 (one image, or all
 // at one place), so that it can serve as a length unit.
 double CentreSpread(const Reconstruction& reconstruction, const std::vector<image_t>& image_ids) {
+  const double count = std::max<double>(1.0, static_cast<double>(image_ids.size()));
   Eigen::Vector3d mean = Eigen::Vector3d::Zero();
   for (const image_t id : image_ids) mean += reconstruction.GetImage(id).ProjectionCenter();
-  mean /= std::max<double>(1.0, static_cast<double>(image_ids.size()));
+  mean /= count;
   double sum = 0.0;
   for (const image_t id : image_ids) {
     sum += (reconstruction.GetImage(id).ProjectionCenter() - mean).squaredNorm();
   }
-  const double spread = std::sqrt(sum / std::max<double>(1.0, static_cast<double>(image_ids.size())));
+  const double spread = std::sqrt(sum / count);
   return spread > 0.0 ? spread : 1.0;
 }
 

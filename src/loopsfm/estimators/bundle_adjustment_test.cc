@@ -632,7 +632,7 @@ TEST(BundleAdjustment, SettleToleranceEndsTheSolveOnceTheCamerasSettle) {
   BundleAdjuster settled_adjuster(options, config);
   ASSERT_TRUE(settled_adjuster.Solve(&settled)) << settled_adjuster.FullReport();
   EXPECT_TRUE(settled_adjuster.report().settled);
-  EXPECT_LE(settled_adjuster.report().num_iterations, 12) << settled_adjuster.FullReport() << full_adjuster.FullReport();
+  EXPECT_LE(settled_adjuster.report().num_iterations, 12);
   EXPECT_GT(full_adjuster.report().num_iterations, settled_adjuster.report().num_iterations);
   // Where it stopped, the poses are those of the full solve, well below the noise's effect
   // on them (a centre error of ~1e-2 against the truth, scene size ~12).
