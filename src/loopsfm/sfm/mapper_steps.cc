@@ -270,7 +270,7 @@ image_t MapperState::ScaleGaugeImage() const {
   // the rest of the map holds weakly: where the frames there fit the rest badly (at a loop's
   // seam), growing the whole model away from the pair lowers the cost a little with every
   // step, and block.mp4's bundle after its loop closing did so for 100 iterations, the model
-  // 10x larger at the end. The registered frame farthest from the first holds the scale
+  // about 7x larger at the end. The registered frame farthest from the first holds the scale
   // with the whole map's extent.
   const Eigen::Vector3d first = reconstruction_.GetImage(gauge1_).ProjectionCenter();
   image_t farthest = gauge2_;
