@@ -122,21 +122,6 @@ struct CentreCoordinatePrior {
   double weight;
 };
 
-// RMS distance of the images' centres from their mean; 1 where that is 0 (one image, or all
-// at one place), so that it can serve as a length unit.
-double CentreSpread(const Reconstruction& reconstruction, const std::vector<image_t>& image_ids) {
-  const double count = std::max<double>(1.0, static_cast<double>(image_ids.size()));
-  Eigen::Vector3d mean = Eigen::Vector3d::Zero();
-  for (const image_t id : image_ids) mean += reconstruction.GetImage(id).ProjectionCenter();
-  mean /= count;
-  double sum = 0.0;
-  for (const image_t id : image_ids) {
-    sum += (reconstruction.GetImage(id).ProjectionCenter() - mean).squaredNorm();
-  }
-  const double spread = std::sqrt(sum / count);
-  return spread > 0.0 ? spread : 1.0;
-}
-
 std::optional<ceres::SparseLinearAlgebraLibraryType> AvailableSparseLibrary() {
   for (const auto type : {ceres::SUITE_SPARSE, ceres::EIGEN_SPARSE, ceres::CX_SPARSE}) {
     if (ceres::IsSparseLinearAlgebraLibraryTypeAvailable(type)) return type;
@@ -259,7 +244,12 @@ void BundleAdjuster::SetUp(Reconstruction* reconstruction) {
   loss_function_ = CreateLossFunction(options_.loss_function, options_.loss_function_scale);
 
   const std::vector<image_t> image_ids = Sorted(config_.ImageIds());
-  centre_spread_ = CentreSpread(*reconstruction_, image_ids);
+  std::vector<Eigen::Vector3d> centres;
+  for (const image_t id : image_ids) {
+    centres.push_back(reconstruction_->GetImage(id).ProjectionCenter());
+  }
+  const double spread = CentreSpread(centres);
+  centre_spread_ = spread > 0.0 ? spread : 1.0;  // one image, or all at one place
   for (const image_t image_id : image_ids) AddImage(image_id);
 
   // Points seen by the config's images, and those the config adds explicitly, enter with

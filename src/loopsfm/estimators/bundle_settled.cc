@@ -6,6 +6,16 @@
 
 namespace loopsfm {
 
+double CentreSpread(const std::vector<Eigen::Vector3d>& centres) {
+  if (centres.empty()) return 0.0;
+  Eigen::Vector3d mean = Eigen::Vector3d::Zero();
+  for (const Eigen::Vector3d& c : centres) mean += c;
+  mean /= static_cast<double>(centres.size());
+  double sum = 0.0;
+  for (const Eigen::Vector3d& c : centres) sum += (c - mean).squaredNorm();
+  return std::sqrt(sum / static_cast<double>(centres.size()));
+}
+
 SettledCallback::SettledCallback(const Reconstruction& reconstruction,
                                  std::vector<image_t> image_ids,
                                  std::vector<camera_t> camera_ids, double tolerance)
@@ -14,13 +24,7 @@ SettledCallback::SettledCallback(const Reconstruction& reconstruction,
       camera_ids_(std::move(camera_ids)),
       tolerance_(tolerance) {
   Snapshot();
-  if (centres_.empty()) return;
-  Eigen::Vector3d mean = Eigen::Vector3d::Zero();
-  for (const Eigen::Vector3d& c : centres_) mean += c;
-  mean /= static_cast<double>(centres_.size());
-  double sum = 0.0;
-  for (const Eigen::Vector3d& c : centres_) sum += (c - mean).squaredNorm();
-  spread_ = std::sqrt(sum / static_cast<double>(centres_.size()));
+  spread_ = CentreSpread(centres_);
 }
 
 ceres::CallbackReturnType SettledCallback::operator()(const ceres::IterationSummary& summary) {

@@ -13,6 +13,10 @@
 
 namespace loopsfm {
 
+// RMS distance of the centres from their mean (0 for none): the length unit of the settle
+// test and of the bundle's centre priors.
+double CentreSpread(const std::vector<Eigen::Vector3d>& centres);
+
 class SettledCallback : public ceres::IterationCallback {
  public:
   // image_ids: the variable poses; camera_ids: the cameras with refined parameters.

@@ -5,17 +5,13 @@
 #include <Eigen/Core>
 #include <Eigen/Geometry>
 
+#include "loopsfm/geometry/rigid3.h"
+
 namespace loopsfm {
 namespace {
 
 using Matrix76 = Eigen::Matrix<double, 7, 6, Eigen::RowMajor>;
 using Matrix67 = Eigen::Matrix<double, 6, 7, Eigen::RowMajor>;
-
-Eigen::Matrix3d Skew(const Eigen::Vector3d& v) {
-  Eigen::Matrix3d m;
-  m << 0.0, -v.z(), v.y(), v.z(), 0.0, -v.x(), -v.y(), v.x(), 0.0;
-  return m;
-}
 
 Eigen::Quaterniond ExpRotation(const Eigen::Vector3d& rotation_vector) {
   const double angle = rotation_vector.norm();

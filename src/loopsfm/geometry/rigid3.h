@@ -89,6 +89,13 @@ inline Rigid3d TransformCamFromWorld(const Rigid3d& cam_from_old_world, const Si
 }
 
 // Angle of a rotation in degrees, in [0, 180].
+// The cross-product matrix: Skew(v) * w == v.cross(w).
+inline Eigen::Matrix3d Skew(const Eigen::Vector3d& v) {
+  Eigen::Matrix3d m;
+  m << 0.0, -v.z(), v.y(), v.z(), 0.0, -v.x(), -v.y(), v.x(), 0.0;
+  return m;
+}
+
 inline double RotationAngleDegrees(const Eigen::Quaterniond& q) {
   return Eigen::AngleAxisd(q.normalized()).angle() * 180.0 / M_PI;
 }

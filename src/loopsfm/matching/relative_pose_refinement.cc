@@ -5,14 +5,10 @@
 #include <Eigen/Dense>
 #include <Eigen/Geometry>
 
+#include "loopsfm/geometry/rigid3.h"
+
 namespace loopsfm {
 namespace {
-
-Eigen::Matrix3d Skew(const Eigen::Vector3d& v) {
-  Eigen::Matrix3d m;
-  m << 0, -v.z(), v.y(), v.z(), 0, -v.x(), -v.y(), v.x(), 0;
-  return m;
-}
 
 // Signed Sampson residual, whose square is the Sampson distance.
 double SampsonResidual(const Eigen::Matrix3d& E, const Eigen::Vector2d& x1,

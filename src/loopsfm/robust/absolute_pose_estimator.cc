@@ -6,6 +6,7 @@
 #include <Eigen/Cholesky>
 #include <Eigen/Geometry>
 
+#include "loopsfm/geometry/rigid3.h"
 #include "loopsfm/robust/p3p.h"
 #include "loopsfm/util/errors.h"
 
@@ -27,12 +28,6 @@ double PoseCost(std::span<const Eigen::Vector2d> points2D, std::span<const Eigen
     cost += (p.head<2>() / p.z() - points2D[i]).squaredNorm();
   }
   return cost;
-}
-
-Eigen::Matrix3d Skew(const Eigen::Vector3d& v) {
-  Eigen::Matrix3d m;
-  m << 0, -v.z(), v.y(), v.z(), 0, -v.x(), -v.y(), v.x(), 0;
-  return m;
 }
 
 }  // namespace
