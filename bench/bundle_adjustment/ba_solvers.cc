@@ -1,8 +1,9 @@
 // Global bundle adjustment of a real model with each linear solver, side by side: the
-// mapper's global bundle (all registered frames, gauge fixed by the two lowest-id frames,
-// cameras held fixed as with known intrinsics) on a COLMAP model whose 3D points are
-// disturbed by `--noise` pixels (a Gaussian step of noise x depth / focal length, the same
-// draw for every solver). Rounds alternate the solvers, so a loaded machine slows them alike.
+// mapper's global bundle (all registered frames, gauge fixed by the lowest-id frame and the
+// one farthest from it, cameras held fixed as with known intrinsics) on a COLMAP model whose
+// 3D points are disturbed by `--noise` pixels (a Gaussian step of noise x depth / focal
+// length, the same draw for every solver). Rounds alternate the solvers, so a loaded machine
+// slows them alike.
 //
 //   ba_solvers OUT/sparse/0 [--rounds 3] [--noise 2] [--threads 0]
 //
@@ -103,8 +104,9 @@ int Main(int argc, char** argv) {
       BundleAdjustmentConfig config;
       for (const image_t id : frames) config.AddImage(id);
       for (const auto& [id, camera] : rec.Cameras()) config.SetConstantCamera(id);
-      FixGaugeWithTwoImages(rec, frames[0], frames[1], &config);
-      if (full_gauge_block) config.SetConstantCentreCoords(frames[1], {0, 1, 2});
+      const image_t scale_gauge = FarthestRegisteredImage(rec, frames[0], frames[1]);
+      FixGaugeWithTwoImages(rec, frames[0], scale_gauge, &config);
+      if (full_gauge_block) config.SetConstantCentreCoords(scale_gauge, {0, 1, 2});
       BundleAdjustmentOptions options = BundleAdjustmentOptions::Global();
       options.linear_solver = solver;
       options.num_threads = threads > 0 ? threads : -1;

@@ -219,6 +219,21 @@ void FixGaugeWithTwoImages(const Reconstruction& reconstruction, image_t first_i
   config->SetConstantCentreCoords(second_image_id, {coord});
 }
 
+image_t FarthestRegisteredImage(const Reconstruction& reconstruction, image_t from,
+                                image_t fallback) {
+  const Eigen::Vector3d first = reconstruction.GetImage(from).ProjectionCenter();
+  image_t farthest = fallback;
+  double largest = (reconstruction.GetImage(fallback).ProjectionCenter() - first).squaredNorm();
+  for (const image_t id : reconstruction.RegImageIds()) {
+    const double distance = (reconstruction.GetImage(id).ProjectionCenter() - first).squaredNorm();
+    if (distance > largest || (distance == largest && id < farthest)) {
+      largest = distance;
+      farthest = id;
+    }
+  }
+  return farthest;
+}
+
 BundleAdjuster::BundleAdjuster(const BundleAdjustmentOptions& options,
                                const BundleAdjustmentConfig& config)
     : options_(options), config_(config) {

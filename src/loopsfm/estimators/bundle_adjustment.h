@@ -172,6 +172,14 @@ class BundleAdjustmentConfig {
 void FixGaugeWithTwoImages(const Reconstruction& reconstruction, image_t first_image_id,
                            image_t second_image_id, BundleAdjustmentConfig* config);
 
+// The registered image whose centre is farthest from `from`'s (ties: the lowest id), or
+// `fallback` when none is farther than it: the second gauge image that holds the scale over
+// the whole model's extent. A short baseline (the initial pair's, or two consecutive frames')
+// holds it weakly; where the frames there fit the rest badly, a bundle can grow the whole
+// model about the first one, lowering its cost a little with every step.
+image_t FarthestRegisteredImage(const Reconstruction& reconstruction, image_t from,
+                                image_t fallback);
+
 struct BundleAdjustmentReport {
   // True when Ceres ended with a usable solution (converged or ran out of iterations).
   bool success = false;

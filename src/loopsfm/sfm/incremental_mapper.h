@@ -95,9 +95,10 @@ struct LoopClosureOptions {
   // Refinement after a pose-graph correction, whose cameras start far from the bundle's
   // optimum (the first step's cost is about 30x the final one): a bundle over the longest
   // tracks only, up to this many points per frame, moves the cameras most of the way at a
-  // fraction of the cost; the other points are re-triangulated from the moved cameras, and
-  // the full bundle then polishes, ending once no camera moves by more than
-  // polish_settle_tolerance of the centres' spread per step. 0 points: full bundle only.
+  // fraction of the cost; the other points are re-triangulated from the moved cameras (those
+  // that no longer fit them dropped), and the full bundle then polishes, ending once no
+  // camera moves by more than polish_settle_tolerance of the centres' spread per step.
+  // 0 points: full bundle only.
   int refine_points_per_frame = 300;
   double polish_settle_tolerance = 1e-4;
   // Split tracks, in that first bundle: up to this many of each group's tied pairs, each
