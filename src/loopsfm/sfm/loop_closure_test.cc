@@ -1,7 +1,9 @@
 #include "loopsfm/sfm/loop_closure.h"
 
+#include <algorithm>
 #include <map>
 #include <unordered_set>
+#include <vector>
 
 #include <gtest/gtest.h>
 
@@ -318,6 +320,38 @@ TEST(MapperState, SubsetBundleTakesTheLongestWellTriangulatedTracksOfEveryFrame)
     longer_left_out += subset.count(id) == 0 && point.track.Length() > shortest_taken + 2;
   }
   EXPECT_LT(longer_left_out, rec.NumPoints3D() / 2);
+}
+
+TEST(MapperState, SubsetBundleDropsObservationsThatNoLongerFitTheMovedCameras) {
+  const MapperProblem p = WalkOutAndBack();
+  const IncrementalMapperOptions options = LoopOptions();
+  MapperState state(p.input, options);
+  RegisterWithDrift(p, state, 0.0);
+  Reconstruction& rec = state.reconstruction();
+  const int per_frame = 40;
+  const std::unordered_set<point3D_t> subset = state.LongestTrackPoints(per_frame);
+  // One observation of each of a few points outside the subset moved 40 px: the points are
+  // re-triangulated from the moved cameras, and these observations no longer fit them.
+  std::vector<TrackElement> moved;
+  std::vector<point3D_t> ids;
+  for (const auto& [id, point] : rec.Points3D()) ids.push_back(id);
+  std::sort(ids.begin(), ids.end());
+  for (const point3D_t id : ids) {
+    const Point3D& point = rec.GetPoint3D(id);
+    if (subset.count(id) > 0 || point.track.Length() < 5) continue;
+    moved.push_back(point.track.elements[1]);
+    if (moved.size() == 10) break;
+  }
+  ASSERT_EQ(moved.size(), 10u);
+  for (const TrackElement& el : moved) {
+    rec.GetImage(el.image_id).points2D[el.point2D_idx].xy += Eigen::Vector2d(40.0, 0.0);
+  }
+  MapperReport report;
+  state.SubsetBundle(&report, per_frame);
+  for (const TrackElement& el : moved) {
+    EXPECT_FALSE(rec.GetImage(el.image_id).points2D[el.point2D_idx].HasPoint3D())
+        << "frame " << el.image_id << " observation " << el.point2D_idx;
+  }
 }
 
 TEST(MapperState, RefinementAfterACorrectionEndsWhereTheFullBundleDoes) {
