@@ -691,6 +691,33 @@ TEST(BundleAdjustment, GaugeFixUsesTheLargestComponent) {
   EXPECT_EQ(*config.ConstantCentreCoords(12), std::vector<int>{expected});
 }
 
+TEST(BundleAdjustment, ScaleGaugeIsTheRegisteredFrameFarthestFromTheFirst) {
+  Reconstruction scene = MakeArcScene(CameraModelId::kPinhole, 12, 50, 21);
+  auto farthest_by_search = [&](image_t from) {
+    image_t best = 0;
+    double largest = -1.0;
+    for (const image_t id : scene.RegImageIds()) {
+      const double d =
+          (scene.GetImage(id).ProjectionCenter() - scene.GetImage(from).ProjectionCenter()).norm();
+      if (d > largest) {
+        largest = d;
+        best = id;
+      }
+    }
+    return best;
+  };
+  const image_t farthest = farthest_by_search(1);
+  ASSERT_NE(farthest, 2u);
+  EXPECT_EQ(FarthestRegisteredImage(scene, 1, 2), farthest);
+  // Frames not registered are not taken; the fallback stays when none is farther.
+  scene.DeRegisterImage(farthest);
+  EXPECT_EQ(FarthestRegisteredImage(scene, 1, 2), farthest_by_search(1));
+  for (const image_t id : scene.RegImageIds()) {
+    if (id != 1 && id != 2) scene.DeRegisterImage(id);
+  }
+  EXPECT_EQ(FarthestRegisteredImage(scene, 1, 2), 2u);
+}
+
 TEST(BundleAdjustment, OptionsCheckRejectsBadValues) {
   BundleAdjustmentOptions options;
   EXPECT_NO_THROW(options.Check());
