@@ -309,8 +309,8 @@ void MapperState::SubsetBundle(MapperReport* report, int per_frame,
   RepositionPoints(others);
   // Some points no longer fit the moved cameras (observations far off, or seen under too
   // small an angle now). Left in, they lengthen the full bundle's steps and spoil its linear
-  // model: on drift2 (focal -5 %) its steps were up to 3e5 long and 11 of 33 were rejected;
-  // without them (1.7 % of the observations), at most 55 long, 14 steps, none rejected.
+  // model: on drift2 (focal -5 %) its steps were up to 3e5 long and 10 of 32 were rejected;
+  // without them (1.7 % of the observations), at most 55 long, 13 steps, none rejected.
   FilterPoints(others);
   report->seconds_triangulation += tri_timer.ElapsedSeconds();
 }
