@@ -330,8 +330,8 @@ TEST(MapperState, SubsetBundleDropsObservationsThatNoLongerFitTheMovedCameras) {
   Reconstruction& rec = state.reconstruction();
   const int per_frame = 40;
   const std::unordered_set<point3D_t> subset = state.LongestTrackPoints(per_frame);
-  // One observation of each of a few points outside the subset moved 40 px: the points are
-  // re-triangulated from the moved cameras, and these observations no longer fit them.
+  // One observation of each of a few points outside the subset moved 40 px: the subset
+  // bundle re-triangulates those points from the cameras, and these observations do not fit.
   std::vector<TrackElement> moved;
   std::vector<point3D_t> ids;
   for (const auto& [id, point] : rec.Points3D()) ids.push_back(id);
