@@ -20,6 +20,7 @@
 #include "loopsfm/estimators/bundle_adjustment.h"
 #include "loopsfm/math/random.h"
 #include "loopsfm/storage/colmap_model.h"
+#include "loopsfm/util/errors.h"
 #include "loopsfm/util/timer.h"
 
 namespace loopsfm {
@@ -57,22 +58,37 @@ void Disturb(Reconstruction* rec, double noise_px, uint64_t seed) {
   }
 }
 
+constexpr const char* kUsage =
+    "usage: ba_solvers MODEL_DIR [--rounds N] [--noise PX] [--threads N]\n";
+
 int Main(int argc, char** argv) {
+  if (argc >= 2 && (std::string(argv[1]) == "--help" || std::string(argv[1]) == "-h")) {
+    std::printf("%s", kUsage);
+    return 0;
+  }
   if (argc < 2) {
-    std::fprintf(stderr, "usage: ba_solvers MODEL_DIR [--rounds N] [--noise PX] [--threads N]\n");
+    std::fprintf(stderr, "%s", kUsage);
     return 2;
   }
   int rounds = 3, threads = 0;
   double noise_px = 2.0;
-  for (int i = 2; i + 1 < argc; i += 2) {
+  for (int i = 2; i < argc; i += 2) {
     const std::string flag = argv[i];
+    if (i + 1 == argc) {
+      std::fprintf(stderr, "%s needs a value\n%s", flag.c_str(), kUsage);
+      return 2;
+    }
     if (flag == "--rounds") rounds = std::atoi(argv[i + 1]);
     else if (flag == "--noise") noise_px = std::atof(argv[i + 1]);
     else if (flag == "--threads") threads = std::atoi(argv[i + 1]);
     else {
-      std::fprintf(stderr, "unknown flag %s\n", flag.c_str());
+      std::fprintf(stderr, "unknown flag %s\n%s", flag.c_str(), kUsage);
       return 2;
     }
+  }
+  if (rounds < 1 || threads < 0 || !(noise_px >= 0.0)) {
+    std::fprintf(stderr, "need --rounds >= 1, --threads >= 0 and --noise >= 0\n");
+    return 2;
   }
   const Reconstruction model = ReadColmapModel(argv[1]);
   std::vector<image_t> frames = model.RegImageIds();
@@ -129,4 +145,11 @@ int Main(int argc, char** argv) {
 }  // namespace
 }  // namespace loopsfm
 
-int main(int argc, char** argv) { return loopsfm::Main(argc, argv); }
+int main(int argc, char** argv) {
+  try {
+    return loopsfm::Main(argc, argv);
+  } catch (const loopsfm::Error& error) {  // a model folder that is missing or unreadable
+    std::fprintf(stderr, "ba_solvers: %s\n", error.what());
+    return 2;
+  }
+}
