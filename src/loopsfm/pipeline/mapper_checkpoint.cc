@@ -93,7 +93,7 @@ nlohmann::json OptionsJson(const IncrementalMapperOptions& o) {
         l.min_frame_correspondences, l.num_consistent, l.min_frame_inliers, l.min_num_inliers,
         l.min_inlier_ratio, l.max_reproj_error_px, l.max_correction_fraction_of_path,
         l.max_correction_scale, l.covisibility_min_points, l.loop_edge_weight, l.split_weight,
-        l.refine_points_per_frame, l.polish_settle_tolerance}},
+        l.refine_points_per_frame, l.polish_settle_tolerance, l.refine_function_tolerance}},
       {"seed", o.seed},
   };
 }

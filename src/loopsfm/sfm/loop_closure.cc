@@ -34,6 +34,9 @@ void LoopClosureOptions::Check() const {
   LOOPSFM_REQUIRE_OPTION(refine_points_per_frame >= 0,
                          "loop: refine_points_per_frame must be >= 0 (got {})",
                          refine_points_per_frame);
+  LOOPSFM_REQUIRE_OPTION(refine_function_tolerance > 0 && refine_function_tolerance < 1,
+                         "loop: refine_function_tolerance must be in (0, 1) (got {})",
+                         refine_function_tolerance);
   LOOPSFM_REQUIRE_OPTION(polish_settle_tolerance >= 0,
                          "loop: polish_settle_tolerance must be >= 0 (got {})",
                          polish_settle_tolerance);

@@ -354,6 +354,20 @@ TEST(MapperState, SubsetBundleDropsObservationsThatNoLongerFitTheMovedCameras) {
   }
 }
 
+TEST(MapperState, SubsetBundleEndsAtTheFunctionToleranceItIsGiven) {
+  const MapperProblem p = WalkOutAndBack();
+  const IncrementalMapperOptions options = LoopOptions();
+  MapperState loose(p.input, options), tight(p.input, options);
+  RegisterThenDisturb(p, loose);
+  RegisterThenDisturb(p, tight);
+  MapperReport loose_report, tight_report;
+  loose.SubsetBundle(&loose_report, 40, {}, {}, 1e-2);
+  tight.SubsetBundle(&tight_report, 40, {}, {}, 1e-10);
+  ASSERT_EQ(loose_report.num_global_ba, 1);
+  ASSERT_EQ(tight_report.num_global_ba, 1);
+  EXPECT_LT(loose_report.num_global_ba_iterations, tight_report.num_global_ba_iterations);
+}
+
 TEST(MapperState, RefinementAfterACorrectionEndsWhereTheFullBundleDoes) {
   const MapperProblem p = WalkOutAndBack();
   IncrementalMapperOptions options = LoopOptions();
@@ -387,6 +401,11 @@ TEST(LoopCloser, OptionsAreChecked) {
   options = {};
   options.split_refine_ties_per_group = 0;
   EXPECT_THROW(options.Check(), InvalidArgument);
+  for (const double tolerance : {0.0, 1.0}) {
+    options = {};
+    options.refine_function_tolerance = tolerance;
+    EXPECT_THROW(options.Check(), InvalidArgument) << tolerance;
+  }
   options = {};
   EXPECT_NO_THROW(options.Check());
 }

@@ -109,8 +109,9 @@ class MapperState {
     std::function<void(BundleAdjuster&)> add_terms;
     // Only these points' observations enter (BundleAdjustmentConfig::RestrictToPoints).
     std::optional<std::unordered_set<point3D_t>> points;
-    // Replaces BundleAdjustmentOptions::Global()'s settle tolerance.
+    // Replace BundleAdjustmentOptions::Global()'s settle and function tolerances.
     std::optional<double> settle_tolerance;
+    std::optional<double> function_tolerance;
   };
   // Bundle over all registered frames. Returns false when the solver failed.
   bool GlobalBundle(MapperReport* report, const GlobalBundleScope& scope = {});
@@ -123,11 +124,12 @@ class MapperState {
   // at LoopClosureOptions::polish_settle_tolerance.
   void RefineAfterCorrection(MapperReport* report);
   // The first half of that: a global bundle over the points LongestTrackPoints(per_frame)
-  // picks and `also` (with `add_terms`), then the other points re-triangulated from the
-  // moved cameras.
+  // picks and `also` (with `add_terms`, ending at `function_tolerance` when set), then the
+  // other points re-triangulated from the moved cameras.
   void SubsetBundle(MapperReport* report, int per_frame,
                     const std::function<void(BundleAdjuster&)>& add_terms = {},
-                    const std::vector<point3D_t>& also = {});
+                    const std::vector<point3D_t>& also = {},
+                    std::optional<double> function_tolerance = {});
   // Well-triangulated points of the longest tracks, taken longest first while one of their
   // frames has fewer than `per_frame` of them: every frame keeps its best-observed points.
   std::unordered_set<point3D_t> LongestTrackPoints(int per_frame) const;

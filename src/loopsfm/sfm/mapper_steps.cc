@@ -209,6 +209,7 @@ bool MapperState::GlobalBundle(MapperReport* report, const GlobalBundleScope& sc
   BundleAdjustmentOptions ba_options = BundleAdjustmentOptions::Global();
   ba_options.num_threads = options_.num_threads > 0 ? options_.num_threads : -1;
   if (scope.settle_tolerance) ba_options.settle_tolerance = *scope.settle_tolerance;
+  if (scope.function_tolerance) ba_options.function_tolerance = *scope.function_tolerance;
   // A camera's parameters are refined by what its kind of intrinsics asks for, and only
   // once the model has enough frames to constrain them.
   const size_t num_frames = reconstruction_.NumRegImages();
@@ -288,7 +289,7 @@ void MapperState::GlobalRefinement(MapperReport* report,
 void MapperState::RefineAfterCorrection(MapperReport* report) {
   const LoopClosureOptions& loop = options_.loop_closure;
   if (loop.refine_points_per_frame > 0) {
-    SubsetBundle(report, loop.refine_points_per_frame);
+    SubsetBundle(report, loop.refine_points_per_frame, {}, {}, loop.refine_function_tolerance);
     GlobalRefinement(report, loop.polish_settle_tolerance);
   } else {
     GlobalRefinement(report);
@@ -297,14 +298,17 @@ void MapperState::RefineAfterCorrection(MapperReport* report) {
 
 void MapperState::SubsetBundle(MapperReport* report, int per_frame,
                                const std::function<void(BundleAdjuster&)>& add_terms,
-                               const std::vector<point3D_t>& also) {
+                               const std::vector<point3D_t>& also,
+                               std::optional<double> function_tolerance) {
   std::unordered_set<point3D_t> subset = LongestTrackPoints(per_frame);
   subset.insert(also.begin(), also.end());
   std::vector<point3D_t> others;
   for (const auto& [id, point] : reconstruction_.Points3D()) {
     if (subset.count(id) == 0) others.push_back(id);
   }
-  GlobalBundle(report, {.add_terms = add_terms, .points = std::move(subset)});
+  GlobalBundle(report, {.add_terms = add_terms,
+                        .points = std::move(subset),
+                        .function_tolerance = function_tolerance});
   Timer tri_timer;
   RepositionPoints(others);
   // Some points no longer fit the moved cameras (observations far off, or seen under too
