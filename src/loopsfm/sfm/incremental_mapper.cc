@@ -108,10 +108,12 @@ class IncrementalMapper {
         loop_closer_(input, options.loop_closure, options.seed + 1) {}
 
   std::vector<Reconstruction> Run() {
+    Timer ranking;
     const std::vector<InitialPairCandidate> candidates = RankInitialPairs(input_, options_);
-    spdlog::info("mapper: {} initial pair candidates ({} strict)", candidates.size(),
+    spdlog::info("mapper: {} initial pair candidates ({} strict), {:.1f} s", candidates.size(),
                  std::count_if(candidates.begin(), candidates.end(),
-                               [](const auto& c) { return c.tier == 0; }));
+                               [](const auto& c) { return c.tier == 0; }),
+                 ranking.ElapsedSeconds());
     tried_.assign(candidates.size(), 0);
     ModelPtr model;
     bool finished = false;
@@ -259,6 +261,7 @@ class IncrementalMapper {
       const ImagePair& pair = candidates[c].pair->pair;
       if (RegisteredInKeptModel(pair.image_id1) || RegisteredInKeptModel(pair.image_id2)) continue;
       tried_[c] = 1;
+      if (TurnsOnTheSpot(candidates[c], input_, options_)) continue;  // not counted as a trial
       ++trials;
       auto model = std::make_unique<MapperState>(input_, options_);
       if (!InitializeModel(*model, candidates[c], &report_)) continue;

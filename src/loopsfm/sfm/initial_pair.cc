@@ -154,14 +154,7 @@ std::vector<InitialPairCandidate> RankInitialPairs(const MapperInput& input,
     c.median_tri_angle_deg = angles.median_deg;
     c.h_ratio = HomographyInlierRatio(pair, f1, f2, options.max_reproj_error_px);
     if (c.h_ratio > options.init_max_h_inlier_ratio) {
-      // Planar, or the camera only turned: a rotation explaining as much leaves no baseline
-      // to start from (COLMAP's panoramic pairs), and its two-view model is noise.
-      if (RotationInlierRatio(pair, *camera_of_id.at(f1.camera_id), *camera_of_id.at(f2.camera_id),
-                              f1, f2, options.max_reproj_error_px) >
-          options.init_max_h_inlier_ratio) {
-        continue;
-      }
-      c.tier = 2;
+      c.tier = 2;  // planar, or the camera only turned (TurnsOnTheSpot)
     } else if (num_inliers >= options.init_min_num_inliers &&
                angles.num_well_conditioned >= options.init_min_num_points) {
       c.tier = 0;
@@ -180,6 +173,24 @@ std::vector<InitialPairCandidate> RankInitialPairs(const MapperInput& input,
     return frame_index.at(a.pair->pair.image_id2) < frame_index.at(b.pair->pair.image_id2);
   });
   return candidates;
+}
+
+bool TurnsOnTheSpot(const InitialPairCandidate& candidate, const MapperInput& input,
+                    const IncrementalMapperOptions& options) {
+  if (candidate.tier < 2) return false;
+  const MapperPair& pair = *candidate.pair;
+  auto frame = [&](image_t id) -> const MapperFrame& {
+    return *std::find_if(input.frames.begin(), input.frames.end(),
+                         [&](const MapperFrame& f) { return f.image_id == id; });
+  };
+  auto camera = [&](camera_t id) -> const Camera& {
+    return *std::find_if(input.cameras.begin(), input.cameras.end(),
+                         [&](const Camera& c) { return c.camera_id == id; });
+  };
+  const MapperFrame& f1 = frame(pair.pair.image_id1);
+  const MapperFrame& f2 = frame(pair.pair.image_id2);
+  return RotationInlierRatio(pair, camera(f1.camera_id), camera(f2.camera_id), f1, f2,
+                             options.max_reproj_error_px) > options.init_max_h_inlier_ratio;
 }
 
 bool InitializeModel(MapperState& state, const InitialPairCandidate& candidate,

@@ -2,7 +2,10 @@
 
 #include <gtest/gtest.h>
 
+#include <Eigen/Geometry>
+
 #include "loopsfm/geometry/triangulation.h"
+#include "loopsfm/math/random.h"
 #include "loopsfm/sfm/mapper_state.h"
 #include "loopsfm/sfm/sfm_test_problem.h"
 
@@ -78,6 +81,62 @@ TEST(InitialPair, TwoViewModelIsValidatedBeforeGrowing) {
   EXPECT_FALSE(InitializeModel(state, candidate, &report));
   EXPECT_EQ(report.num_init_trials, 2);
   EXPECT_EQ(report.num_init_accepted, 1);
+}
+
+// Two views of 200 points, the second camera turned 8 degrees about the vertical and moved
+// by `move`; the points at depth 6..10 m, or all on the plane z = 8 m; 0.3 px noise.
+// Returned with a tier-2 candidate (the homography explains both) whose pair the caller sets.
+struct TwoViews {
+  MapperInput input;
+  InitialPairCandidate candidate;
+};
+
+TwoViews MakeTwoViews(const Eigen::Vector3d& move, bool planar) {
+  TwoViews views;
+  const Camera camera = testing::TestCamera();  // 640 x 480, focal 500
+  views.input.cameras = {camera};
+  const Eigen::Matrix3d turn =
+      Eigen::AngleAxisd(8.0 * M_PI / 180.0, Eigen::Vector3d::UnitY()).toRotationMatrix();
+  Random random(5);
+  MapperFrame f1{.image_id = 1, .camera_id = 1, .name = "a.png", .points2D = {}};
+  MapperFrame f2{.image_id = 2, .camera_id = 1, .name = "b.png", .points2D = {}};
+  MapperPair pair;
+  pair.pair = ImagePair(1, 2);
+  pair.geometry.config = TwoViewGeometry::kCalibrated;
+  while (f1.points2D.size() < 200) {
+    const double depth = planar ? 8.0 : random.UniformReal(6.0, 10.0);
+    const Eigen::Vector3d x(random.UniformReal(-4.0, 4.0), random.UniformReal(-3.0, 3.0), depth);
+    const Eigen::Vector3d in2 = turn * (x - move);
+    const Eigen::Vector2d p1 = camera.ImgFromCam(x), p2 = camera.ImgFromCam(in2);
+    if (in2.z() <= 0 || p2.x() < 0 || p2.x() > 640 || p2.y() < 0 || p2.y() > 480) continue;
+    const Eigen::Vector2d noise1(random.Normal(0, 0.3), random.Normal(0, 0.3));
+    const Eigen::Vector2d noise2(random.Normal(0, 0.3), random.Normal(0, 0.3));
+    const point2D_t idx = static_cast<point2D_t>(f1.points2D.size());
+    f1.points2D.push_back(p1 + noise1);
+    f2.points2D.push_back(p2 + noise2);
+    pair.geometry.inlier_matches.push_back({idx, idx});
+  }
+  views.input.frames = {f1, f2};
+  views.input.pairs = {pair};
+  views.candidate.num_inliers = 200;
+  views.candidate.tier = 2;
+  return views;
+}
+
+TEST(InitialPair, ACameraTurningOnTheSpotIsNeverTried) {
+  const IncrementalMapperOptions options;
+  // Turned only: a rotation explains every inlier.
+  TwoViews turned = MakeTwoViews(Eigen::Vector3d::Zero(), /*planar=*/false);
+  turned.candidate.pair = &turned.input.pairs.front();
+  EXPECT_TRUE(TurnsOnTheSpot(turned.candidate, turned.input, options));
+  // A wall approached by 1 m: the homography explains it, a rotation does not. (Moved
+  // sideways instead, a wall ahead looks much like a turn, the panoramic ambiguity.)
+  TwoViews wall = MakeTwoViews(Eigen::Vector3d(0.2, 0.0, 1.0), /*planar=*/true);
+  wall.candidate.pair = &wall.input.pairs.front();
+  EXPECT_FALSE(TurnsOnTheSpot(wall.candidate, wall.input, options));
+  // Only planar candidates are asked.
+  turned.candidate.tier = 1;
+  EXPECT_FALSE(TurnsOnTheSpot(turned.candidate, turned.input, options));
 }
 
 }  // namespace
