@@ -130,6 +130,7 @@ void LoopCloser::Restore(const MapperCheckpoint& checkpoint) {
   if (!random) throw InputError("the loop closer's saved random state is not one");
   random_ = *random;
   window_.assign(checkpoint.loop_window.begin(), checkpoint.loop_window.end());
+  window_evidence_.clear();  // collected again when needed
   cooldown_ = checkpoint.loop_cooldown;
 }
 
@@ -248,18 +249,22 @@ bool LoopCloser::DetectAndClose(MapperState& model, image_t image_id, MapperRepo
   if (cooldown_ > 0) --cooldown_;
   Evidence evidence = CollectEvidence(model, image_id);
   if (static_cast<int>(evidence.correspondences.size()) < options_.min_frame_correspondences) {
-    window_.clear();  // the registrations with evidence must be consecutive
+    ClearWindow();  // the registrations with evidence must be consecutive
     return false;
   }
   window_.push_back(image_id);
+  if (!refine_) window_evidence_.push_back(evidence);
   while (static_cast<int>(window_.size()) > options_.num_consistent) window_.pop_front();
+  while (window_evidence_.size() > window_.size()) window_evidence_.pop_front();
   if (static_cast<int>(window_.size()) < options_.num_consistent || cooldown_ > 0) return false;
 
-  // Points may have moved or gone since the older registrations of the window: collect
-  // theirs again (this frame's was just collected).
+  // While mapping, points may have moved or gone since the older registrations of the
+  // window: collect theirs again. After mapping the model stays as it was, and each
+  // frame's evidence is collected once instead of num_consistent times.
+  const bool kept = window_evidence_.size() == window_.size();
   std::vector<Evidence> current;
   for (size_t f = 0; f + 1 < window_.size(); ++f) {
-    current.push_back(CollectEvidence(model, window_[f]));
+    current.push_back(kept ? window_evidence_[f] : CollectEvidence(model, window_[f]));
   }
   current.push_back(std::move(evidence));
   std::vector<PointCorrespondence> all;
@@ -310,7 +315,7 @@ bool LoopCloser::DetectAndClose(MapperState& model, image_t image_id, MapperRepo
                  "path between them), scale {:.3f}, is too large for drift",
                  rec.GetImage(image_id).name, input_.frames[old_index].name, alignment.num_inliers,
                  translation, 100.0 * fraction, scale);
-    window_.clear();
+    ClearWindow();
     cooldown_ = options_.num_consistent;
     return false;
   }
@@ -412,7 +417,7 @@ bool LoopCloser::DetectAndClose(MapperState& model, image_t image_id, MapperRepo
     report->loop_links.push_back({"posegraph", rec.GetImage(loop_edges[e].first).name,
                                   rec.GetImage(loop_edges[e].second).name, edge_pairs[e]});
   }
-  window_.clear();
+  ClearWindow();
   // While mapping, each closing ends with a global refinement: wait for more of the loop.
   // After mapping, every window of the overlap adds its edges to the one correction.
   cooldown_ = refine_ ? options_.min_frame_gap / 2 : options_.num_consistent;

@@ -87,7 +87,9 @@ class LoopCloser {
   // refinement) so mapping can go on from a consistent map. Otherwise (after mapping, every
   // frame already registered) the loops found are gathered and corrected together by
   // CloseGathered: one pose graph over all their edges, then the points of each track that
-  // now agree are merged, and the caller refines once at the end.
+  // now agree are merged, and the caller refines once at the end. Without refine the model
+  // must not change between AfterRegistration calls: the evidence of the window's earlier
+  // registrations is kept from their own calls, not collected again.
   LoopCloser(const MapperInput& input, const LoopClosureOptions& options,
              uint64_t seed = kDefaultRandomSeed, bool refine = true);
 
@@ -130,6 +132,10 @@ class LoopCloser {
   };
 
   bool DetectAndClose(MapperState& model, image_t image_id, MapperReport* report);
+  void ClearWindow() {
+    window_.clear();
+    window_evidence_.clear();
+  }
   Evidence CollectEvidence(const MapperState& model, image_t image_id) const;
   // Pose graph over the registered frames and `loop_edges` (each of weight `loop_weight`),
   // points moved with their frames, the pairs in `fuse` fused, then the tracks
@@ -145,6 +151,8 @@ class LoopCloser {
   std::unordered_map<image_t, int> frame_index_;
   // The latest registrations that had evidence, oldest first.
   std::deque<image_t> window_;
+  // Without refine: their evidence, as collected at their calls (the same window).
+  std::deque<Evidence> window_evidence_;
   // Registrations left before another loop may be closed.
   int cooldown_ = 0;
   // The warning that the given intrinsics look wrong was given.
