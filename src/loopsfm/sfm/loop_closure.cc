@@ -97,7 +97,7 @@ Reconstruction CloseLoopsAfterMapping(const MapperInput& input, const Reconstruc
   // Split tracks start from a refined map after the pose graph, from the map as triangulated
   // without it; their pass ends with a bundle of its own.
   if (corrected) {
-    state.RefineAfterCorrection(report);
+    state.RefineAfterCorrection(report, loop.refine_function_tolerance);
   } else if (!loop.SplitTracks() || loop.CloseWhileMapping()) {
     state.GlobalRefinement(report);
   }

@@ -120,7 +120,8 @@ TEST(LoopCloser, LoopsFoundAfterMappingAreCorrectedTogether) {
   for (const ClosedLoop& loop : report.loops_closed) {
     EXPECT_EQ(loop.num_points_after, static_cast<long long>(state.reconstruction().NumPoints3D()));
   }
-  state.RefineAfterCorrection(&report);  // as CloseLoopsAfterMapping does
+  // As CloseLoopsAfterMapping does.
+  state.RefineAfterCorrection(&report, walk.options.loop_closure.refine_function_tolerance);
   const testing::PoseError after = testing::ComparePoses(state.reconstruction(), p);
   EXPECT_EQ(after.num_registered, 80);
   EXPECT_LT(after.max_centre_error, 0.25 * before.max_centre_error)
@@ -378,7 +379,7 @@ TEST(MapperState, RefinementAfterACorrectionEndsWhereTheFullBundleDoes) {
   const testing::PoseError disturbed = testing::ComparePoses(full.reconstruction(), p);
   MapperReport full_report, subset_report;
   full.GlobalRefinement(&full_report);
-  subset.RefineAfterCorrection(&subset_report);
+  subset.RefineAfterCorrection(&subset_report, options.loop_closure.refine_function_tolerance);
   EXPECT_EQ(subset_report.num_global_ba, full_report.num_global_ba + 1);
   const testing::PoseError after_full = testing::ComparePoses(full.reconstruction(), p);
   const testing::PoseError after_subset = testing::ComparePoses(subset.reconstruction(), p);

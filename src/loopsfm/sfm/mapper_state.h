@@ -121,8 +121,10 @@ class MapperState {
   // Global refinement after a correction moved the cameras far from the bundle's optimum
   // (a loop closed by the pose graph): first a bundle over the longest tracks only, then
   // the other points re-triangulated from the moved cameras, then GlobalRefinement ending
-  // at LoopClosureOptions::polish_settle_tolerance.
-  void RefineAfterCorrection(MapperReport* report);
+  // at LoopClosureOptions::polish_settle_tolerance. The first bundle ends at
+  // `subset_function_tolerance` when set (else Ceres' default).
+  void RefineAfterCorrection(MapperReport* report,
+                             std::optional<double> subset_function_tolerance = {});
   // The first half of that: a global bundle over the points LongestTrackPoints(per_frame)
   // picks and `also` (with `add_terms`, ending at `function_tolerance` when set), then the
   // other points re-triangulated from the moved cameras.

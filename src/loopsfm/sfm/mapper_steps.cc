@@ -286,10 +286,11 @@ void MapperState::GlobalRefinement(MapperReport* report,
   }
 }
 
-void MapperState::RefineAfterCorrection(MapperReport* report) {
+void MapperState::RefineAfterCorrection(MapperReport* report,
+                                        std::optional<double> subset_function_tolerance) {
   const LoopClosureOptions& loop = options_.loop_closure;
   if (loop.refine_points_per_frame > 0) {
-    SubsetBundle(report, loop.refine_points_per_frame, {}, {}, loop.refine_function_tolerance);
+    SubsetBundle(report, loop.refine_points_per_frame, {}, {}, subset_function_tolerance);
     GlobalRefinement(report, loop.polish_settle_tolerance);
   } else {
     GlobalRefinement(report);
