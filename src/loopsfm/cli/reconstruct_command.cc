@@ -34,9 +34,16 @@ void PrintSummary(const ReconstructReport& report) {
   for (const CameraSelfCalibration& c : report.self_calibration.cameras) {
     out += fmt::format("{:<28}", fmt::format("self-calibration camera {}", c.camera_id));
     if (c.applied) {
-      out += fmt::format("focal {:.1f} px, spread {:.2f} %, {} of {} pairs agree\n", c.focal_px,
+      out += fmt::format("focal {:.1f} px, spread {:.2f} %, {} of {} pairs agree", c.focal_px,
                          100.0 * c.estimate.spread, c.estimate.num_pairs_inlier,
                          c.estimate.num_pairs);
+      if (c.distortion.significant) {
+        out += fmt::format(", k1 {:.4f} (epipolar error {:.2f} px, {:.2f} px without)", c.k1,
+                           c.distortion.error_px, c.distortion.error_px_without);
+      } else if (c.distortion_estimated) {
+        out += ", no distortion found";
+      }
+      out += "\n";
     } else {
       out += fmt::format("kept the guess {:.1f} px: {}\n", c.initial_focal_px,
                          c.estimate.explanation);

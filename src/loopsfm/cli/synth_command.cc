@@ -52,6 +52,10 @@ void AddSynthCommand(CLI::App& app) {
   cmd->add_option("--frames", options->num_frames, "Number of frames")->capture_default_str();
   cmd->add_option("--width", options->width, "Image width")->capture_default_str();
   cmd->add_option("--height", options->height, "Image height")->capture_default_str();
+  cmd->add_option("--focal-factor", options->focal_length_factor,
+                  "Focal length as a multiple of the image width (0.9: a 58 degree field across "
+                  "the width; 0.45: 96 degrees, an action camera)")
+      ->capture_default_str();
   cmd->add_flag("--video", options->video, "Write video.mp4 instead of images/");
   cmd->add_option("--seed", options->seed, "Seed of textures, layout, shake and noise")
       ->capture_default_str();

@@ -8,6 +8,7 @@
 #include <Eigen/SVD>
 #include <fmt/format.h>
 
+#include "loopsfm/math/golden_section.h"
 #include "loopsfm/util/errors.h"
 
 namespace loopsfm {
@@ -41,31 +42,6 @@ double NormalisedCost(const Eigen::Matrix3d& normalised, double g) {
   const Eigen::Vector3d s = Eigen::JacobiSVD<Eigen::Matrix3d>(essential).singularValues();
   const double sum = s[0] + s[1];
   return sum > 0.0 ? (s[0] - s[1]) / sum : 1.0;
-}
-
-// Minimum of a function of x on [lo, hi] by golden-section search, to a bracket of tol.
-template <typename Function>
-double GoldenSectionMinimum(const Function& function, double lo, double hi, double tol) {
-  constexpr double kRatio = 0.38196601125010515;  // (3 - sqrt(5)) / 2
-  double a = lo, b = hi;
-  double x1 = a + kRatio * (b - a), x2 = b - kRatio * (b - a);
-  double f1 = function(x1), f2 = function(x2);
-  while (b - a > tol) {
-    if (f1 <= f2) {
-      b = x2;
-      x2 = x1;
-      f2 = f1;
-      x1 = a + kRatio * (b - a);
-      f1 = function(x1);
-    } else {
-      a = x1;
-      x1 = x2;
-      f1 = f2;
-      x2 = b - kRatio * (b - a);
-      f2 = function(x2);
-    }
-  }
-  return f1 <= f2 ? x1 : x2;
 }
 
 // Index of the clear minimum of a sampled cost curve, or -1 (see the header, step 2).

@@ -12,6 +12,7 @@
 #include <fmt/format.h>
 #include <gtest/gtest.h>
 
+#include "loopsfm/geometry/epipolar.h"
 #include "loopsfm/math/random.h"
 #include "loopsfm/util/errors.h"
 
@@ -38,39 +39,6 @@ bool InImage(const Image& image, const Eigen::Vector2d& x) {
   return x.x() >= 0 && x.x() < image.width && x.y() >= 0 && x.y() < image.height;
 }
 
-// Hartley's normalised 8-point algorithm with rank-2 enforcement: x2^T F x1 = 0, in pixels.
-Eigen::Matrix3d EightPoint(const std::vector<Eigen::Vector2d>& x1,
-                           const std::vector<Eigen::Vector2d>& x2) {
-  auto normalisation = [](const std::vector<Eigen::Vector2d>& x) {
-    Eigen::Vector2d mean = Eigen::Vector2d::Zero();
-    for (const auto& p : x) mean += p;
-    mean /= x.size();
-    double distance = 0.0;
-    for (const auto& p : x) distance += (p - mean).norm();
-    const double s = std::sqrt(2.0) * x.size() / distance;
-    Eigen::Matrix3d t;
-    t << s, 0, -s * mean.x(), 0, s, -s * mean.y(), 0, 0, 1;
-    return t;
-  };
-  const Eigen::Matrix3d t1 = normalisation(x1), t2 = normalisation(x2);
-  Eigen::Matrix<double, 9, 9> ata = Eigen::Matrix<double, 9, 9>::Zero();
-  for (size_t i = 0; i < x1.size(); ++i) {
-    const Eigen::Vector3d p = t1 * x1[i].homogeneous(), q = t2 * x2[i].homogeneous();
-    Eigen::Matrix<double, 9, 1> row;
-    for (int r = 0; r < 3; ++r) row.segment<3>(3 * r) = q[r] * p;
-    ata += row * row.transpose();
-  }
-  // The right singular vector of the smallest singular value.
-  const Eigen::JacobiSVD<Eigen::Matrix<double, 9, 9>> svd(ata, Eigen::ComputeFullV);
-  const Eigen::Matrix<double, 9, 1> f = svd.matrixV().col(8);
-  Eigen::Matrix3d f_normalised;
-  f_normalised << f[0], f[1], f[2], f[3], f[4], f[5], f[6], f[7], f[8];
-  Eigen::JacobiSVD<Eigen::Matrix3d> rank2(f_normalised, Eigen::ComputeFullU | Eigen::ComputeFullV);
-  Eigen::Vector3d s = rank2.singularValues();
-  s[2] = 0.0;
-  return t2.transpose() * (rank2.matrixU() * s.asDiagonal() * rank2.matrixV().transpose()) * t1;
-}
-
 // F fitted by the 8-point algorithm to 200 noisy matches of points at depth 4..10 in front of
 // camera 1 (at the origin, looking along +z) that camera 2 (cam2_from_world, centre2) sees
 // too. False when camera 2 sees too few of them.
@@ -90,7 +58,7 @@ bool FitPairF(Random& random, const Image& image, double focal,
     x2.push_back((k * in_cam2).hnormalized() + Noise(random, noise_px));
   }
   if (x1.size() < 200) return false;
-  *fundamental = EightPoint(x1, x2);
+  *fundamental = FundamentalFromEightPoints(x1, x2);
   return true;
 }
 
@@ -150,7 +118,7 @@ Eigen::Matrix3d PureRotationF(Random& random, const Image& image, double focal, 
       x1.push_back(pixel + Noise(random, noise_px));
       x2.push_back(mapped.hnormalized() + Noise(random, noise_px));
     }
-    if (x1.size() == 200) return EightPoint(x1, x2);
+    if (x1.size() == 200) return FundamentalFromEightPoints(x1, x2);
   }
 }
 
@@ -172,7 +140,7 @@ Eigen::Matrix3d PlanarSceneF(Random& random, const Image& image, double focal) {
       x1.push_back(pixel + Noise(random, 0.5));
       x2.push_back((k * in_cam2).hnormalized() + Noise(random, 0.5));
     }
-    if (x1.size() == 200) return EightPoint(x1, x2);
+    if (x1.size() == 200) return FundamentalFromEightPoints(x1, x2);
   }
 }
 
@@ -183,7 +151,7 @@ Eigen::Matrix3d RandomMatchesF(Random& random, const Image& image) {
     x1.emplace_back(random.UniformReal(0, image.width), random.UniformReal(0, image.height));
     x2.emplace_back(random.UniformReal(0, image.width), random.UniformReal(0, image.height));
   }
-  return EightPoint(x1, x2);
+  return FundamentalFromEightPoints(x1, x2);
 }
 
 // num_pairs pairs of which the first num_outliers are outliers, cycling through: random

@@ -5,21 +5,11 @@
 #include <Eigen/Dense>
 #include <Eigen/Geometry>
 
+#include "loopsfm/geometry/epipolar.h"
 #include "loopsfm/geometry/rigid3.h"
 
 namespace loopsfm {
 namespace {
-
-// Signed Sampson residual, whose square is the Sampson distance.
-double SampsonResidual(const Eigen::Matrix3d& E, const Eigen::Vector2d& x1,
-                       const Eigen::Vector2d& x2) {
-  const Eigen::Vector3d h1 = x1.homogeneous(), h2 = x2.homogeneous();
-  const Eigen::Vector3d Ex1 = E * h1;
-  const Eigen::Vector3d Etx2 = E.transpose() * h2;
-  const double denominator = Ex1.head<2>().squaredNorm() + Etx2.head<2>().squaredNorm();
-  if (denominator <= 0) return 0.0;
-  return h2.dot(Ex1) / std::sqrt(denominator);
-}
 
 // Pose on the manifold: rotation update exp(w) R0, translation t0 + basis * d, renormalised.
 struct LocalPose {
@@ -49,12 +39,6 @@ struct LocalPose {
 
 Eigen::Matrix3d EssentialFromPose(const Rigid3d& cam2_from_cam1) {
   return Skew(cam2_from_cam1.translation) * cam2_from_cam1.rotation.toRotationMatrix();
-}
-
-double SampsonSquaredError(const Eigen::Matrix3d& E, const Eigen::Vector2d& x1,
-                           const Eigen::Vector2d& x2) {
-  const double r = SampsonResidual(E, x1, x2);
-  return r * r;
 }
 
 Rigid3d RefineRelativePose(const std::vector<Eigen::Vector2d>& points1,

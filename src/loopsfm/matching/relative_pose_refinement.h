@@ -9,16 +9,13 @@
 
 #include <Eigen/Core>
 
+#include "loopsfm/geometry/epipolar.h"  // SampsonSquaredError
 #include "loopsfm/geometry/rigid3.h"
 
 namespace loopsfm {
 
 // E = [t]x R of cam2_from_cam1 = (R, t), so that x2^T E x1 = 0 for normalised x1, x2.
 Eigen::Matrix3d EssentialFromPose(const Rigid3d& cam2_from_cam1);
-
-// Squared Sampson distance of a correspondence of normalised coordinates (z = 1) to E.
-double SampsonSquaredError(const Eigen::Matrix3d& E, const Eigen::Vector2d& x1,
-                           const Eigen::Vector2d& x2);
 
 // Levenberg-Marquardt on the Sampson errors under a Cauchy loss of scale loss_scale
 // (normalised units, e.g. the inlier threshold / focal length), over the rotation and the

@@ -2,15 +2,46 @@
 
 #include <algorithm>
 #include <unordered_map>
+#include <vector>
 
 #include "loopsfm/util/errors.h"
 #include "loopsfm/util/logging.h"
 #include "loopsfm/util/timer.h"
 
 namespace loopsfm {
+namespace {
+
+// Index of the polynomial radial term k1 in the model's parameters; -1 for models without
+// one (the pinhole models) or with an equidistant one (the fisheye models: their k1 is a
+// term in the angle, not in the radius, and kappa does not convert to it).
+int RadialTermIndex(CameraModelId model_id) {
+  switch (model_id) {
+    case CameraModelId::kSimpleRadial:
+    case CameraModelId::kRadial: return 3;
+    case CameraModelId::kOpenCV:
+    case CameraModelId::kFullOpenCV: return 4;
+    default: return -1;
+  }
+}
+
+// A pair's inlier correspondences in pixels.
+PairCorrespondences InlierPixels(const MapperPair& pair, const MapperFrame& frame1,
+                                 const MapperFrame& frame2) {
+  PairCorrespondences correspondences;
+  correspondences.points1.reserve(pair.geometry.inlier_matches.size());
+  correspondences.points2.reserve(pair.geometry.inlier_matches.size());
+  for (const FeatureMatch& match : pair.geometry.inlier_matches) {
+    correspondences.points1.push_back(frame1.points2D.at(match.point2D_idx1));
+    correspondences.points2.push_back(frame2.points2D.at(match.point2D_idx2));
+  }
+  return correspondences;
+}
+
+}  // namespace
 
 void SelfCalibrationOptions::Check() const {
   focal.Check();
+  distortion.Check();
   verification.Check();
   LOOPSFM_REQUIRE_OPTION(max_num_pairs > 0, "self-calibration max_num_pairs must be positive, got {}",
                          max_num_pairs);
@@ -55,6 +86,28 @@ SelfCalibrationReport SelfCalibrate(const SelfCalibrationOptions& options, Mappe
       weights.push_back(static_cast<double>(pair->geometry.inlier_matches.size()));
     }
     const Eigen::Vector2d principal_point(camera.width / 2.0, camera.height / 2.0);
+    const double radius_unit = DistortionRadiusUnit(camera.width, camera.height);
+    const int radial_index = RadialTermIndex(camera.model_id);
+    if (options.estimate_distortion && radial_index >= 0) {
+      std::vector<PairCorrespondences> correspondences;
+      correspondences.reserve(pairs.size());
+      for (const MapperPair* pair : pairs) {
+        correspondences.push_back(InlierPixels(*pair, *frame_of.at(pair->pair.image_id1),
+                                               *frame_of.at(pair->pair.image_id2)));
+      }
+      entry.distortion_estimated = true;
+      entry.distortion = EstimateRadialDistortion(correspondences, principal_point, camera.width,
+                                                  camera.height, options.distortion);
+      if (entry.distortion.significant) {
+        // The verified F were fitted to distorted points: fit them again to undistorted ones.
+        fundamentals = UndistortedFundamentals(correspondences, principal_point, radius_unit,
+                                               entry.distortion.kappa,
+                                               options.distortion.error_cap_px);
+      } else {
+        spdlog::info("self-calibration: camera {} keeps k1 = 0: {}", camera.camera_id,
+                     entry.distortion.explanation);
+      }
+    }
     entry.estimate = EstimateSharedFocalLength(fundamentals, weights, principal_point,
                                                camera.width, camera.height, options.focal);
     if (entry.estimate.success) {
@@ -63,6 +116,14 @@ SelfCalibrationReport SelfCalibrate(const SelfCalibrationOptions& options, Mappe
       camera.SetFocalLength(entry.estimate.focal_px);
       entry.focal_px = entry.estimate.focal_px;
       entry.applied = true;
+      if (entry.distortion.significant) {
+        entry.k1 = RadialTermForFocalLength(entry.distortion.kappa, entry.focal_px, radius_unit);
+        camera.params.at(radial_index) = entry.k1;
+        spdlog::info("self-calibration: camera {} radial term k1 {:.4f} (kappa {:.4f}: epipolar "
+                     "error {:.3f} px, {:.3f} px without, over {} pairs)",
+                     camera.camera_id, entry.k1, entry.distortion.kappa, entry.distortion.error_px,
+                     entry.distortion.error_px_without, entry.distortion.num_pairs_used);
+      }
       calibrated[camera.camera_id] = &camera;
       spdlog::info("self-calibration: camera {} focal length {:.1f} px (guess {:.1f}), spread "
                    "{:.2f} %, {} of {} pairs agree ({} usable)",

@@ -4,6 +4,7 @@
 
 #include <gtest/gtest.h>
 
+#include "loopsfm/geometry/epipolar.h"
 #include "loopsfm/math/random.h"
 
 namespace loopsfm {
@@ -27,8 +28,10 @@ struct Scene {
 // or, with `straight`, walking sideways without turning (focal length not observable).
 // Every frame sees every point (keypoint k is point k, with 0.3 px noise); pairs up to 4
 // frames apart are uncalibrated with the true F and a wrong relative pose, as verification
-// with a wrong focal length would leave them.
-Scene MakeScene(bool straight, bool prior_focal) {
+// with a wrong focal length would leave them. With a radial term k1, the lens bends the
+// points (SIMPLE_RADIAL), the cloud is wider so that they fill the frame, and each pair's F
+// is the one fitted to the bent points, as verification fits it.
+Scene MakeScene(bool straight, bool prior_focal, double k1 = 0.0) {
   Random random(11);
   Scene scene;
   Camera truth;
@@ -36,14 +39,16 @@ Scene MakeScene(bool straight, bool prior_focal) {
   truth.model_id = CameraModelId::kSimpleRadial;
   truth.width = kWidth;
   truth.height = kHeight;
-  truth.params = {kTrueFocal, kWidth / 2.0, kHeight / 2.0, 0.0};
+  truth.params = {kTrueFocal, kWidth / 2.0, kHeight / 2.0, k1};
   Camera camera = prior_focal ? truth : Camera::GuessFromImageSize(kWidth, kHeight);
   camera.camera_id = 1;
   camera.has_prior_focal_length = prior_focal;
   scene.input.cameras = {camera};
   std::vector<Eigen::Vector3d> points;
+  const double width = k1 == 0.0 ? 3.0 : 7.0, height = k1 == 0.0 ? 2.0 : 4.0;
   for (int k = 0; k < 300; ++k) {
-    points.emplace_back(random.UniformReal(-3, 3), random.UniformReal(-2, 2), random.UniformReal(-3, 3));
+    points.emplace_back(random.UniformReal(-width, width), random.UniformReal(-height, height),
+                        random.UniformReal(-3, 3));
   }
   const int num_frames = 16;
   for (int i = 0; i < num_frames; ++i) {
@@ -88,6 +93,10 @@ Scene MakeScene(bool straight, bool prior_focal) {
       pair.geometry.config = TwoViewGeometry::kUncalibrated;
       pair.geometry.F = K.transpose().inverse() * Skew(j_from_i.translation) *
                         j_from_i.rotation.toRotationMatrix() * K.inverse();
+      if (k1 != 0.0) {
+        pair.geometry.F = FundamentalFromEightPoints(scene.input.frames[i].points2D,
+                                                     scene.input.frames[j].points2D);
+      }
       pair.geometry.cam2_from_cam1 = Rigid3d(Eigen::Quaterniond::Identity(), Eigen::Vector3d::UnitX());
       for (point2D_t k = 0; k < points.size(); ++k) pair.geometry.inlier_matches.push_back({k, k});
       scene.input.pairs.push_back(std::move(pair));
@@ -123,6 +132,41 @@ TEST(SelfCalibration, EstimatesTheFocalLengthAndReestimatesThePairsPoses) {
     EXPECT_LT(AngleDeg(truth.translation, pair.geometry.cam2_from_cam1.translation), 3.0) << i << "-" << j;
     EXPECT_EQ(pair.geometry.config, TwoViewGeometry::kUncalibrated);
   }
+}
+
+TEST(SelfCalibration, ABarrelLensIsFoundBeforeTheFocalLength) {
+  constexpr double kTrueK1 = -0.1;
+  Scene scene = MakeScene(/*straight=*/false, /*prior_focal=*/false, kTrueK1);
+  const SelfCalibrationReport report = SelfCalibrate({}, &scene.input);
+  ASSERT_EQ(report.cameras.size(), 1u);
+  const CameraSelfCalibration& c = report.cameras[0];
+  ASSERT_TRUE(c.applied) << c.estimate.explanation;
+  EXPECT_TRUE(c.distortion_estimated);
+  ASSERT_TRUE(c.distortion.significant) << c.distortion.explanation;
+  EXPECT_NEAR(c.k1, kTrueK1, 0.01);
+  EXPECT_NEAR(c.focal_px, kTrueFocal, 0.01 * kTrueFocal);
+  const Camera& camera = scene.input.cameras[0];
+  EXPECT_DOUBLE_EQ(camera.params[0], c.focal_px);
+  EXPECT_DOUBLE_EQ(camera.params[3], c.k1);
+
+  // Without the distortion step, the same pairs put the focal length off.
+  Scene plain = MakeScene(/*straight=*/false, /*prior_focal=*/false, kTrueK1);
+  SelfCalibrationOptions no_distortion;
+  no_distortion.estimate_distortion = false;
+  const CameraSelfCalibration without = SelfCalibrate(no_distortion, &plain.input).cameras.at(0);
+  EXPECT_FALSE(without.distortion_estimated);
+  EXPECT_EQ(plain.input.cameras[0].params[3], 0.0);
+  EXPECT_FALSE(without.applied && std::abs(without.focal_px / kTrueFocal - 1.0) < 0.01)
+      << without.focal_px;
+}
+
+TEST(SelfCalibration, ALensWithoutDistortionKeepsK1AtZero) {
+  Scene scene = MakeScene(/*straight=*/false, /*prior_focal=*/false);
+  const CameraSelfCalibration c = SelfCalibrate({}, &scene.input).cameras.at(0);
+  EXPECT_TRUE(c.distortion_estimated);
+  EXPECT_FALSE(c.distortion.significant);
+  EXPECT_EQ(c.k1, 0.0);
+  EXPECT_EQ(scene.input.cameras[0].params[3], 0.0);
 }
 
 TEST(SelfCalibration, LeavesCamerasWithKnownIntrinsicsAlone) {

@@ -143,7 +143,8 @@ void SynthOptions::Check() const {
                          "image size must be between 8 and 16384 pixels per side, got {}x{}",
                          width, height);
   LOOPSFM_REQUIRE_OPTION(focal_length_factor > 0.05 && focal_length_factor < 20.0,
-                         "focal_length_factor must be in (0.05, 20), got {}",
+                         "the focal length factor (--focal-factor, focal length / image width) must "
+                         "be in (0.05, 20), got {}",
                          focal_length_factor);
   MakeSynthCamera(lens, width, height, focal_length_factor);  // throws for a bad lens
   LOOPSFM_REQUIRE_OPTION(supersampling >= 1 && supersampling <= 8,
