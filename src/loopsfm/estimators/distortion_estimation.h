@@ -55,9 +55,11 @@ struct RadialDistortionOptions {
   double refine_tolerance = 1e-4;
   // Sampson distances are capped here (pixels) before they are summed.
   double error_cap_px = 4.0;
-  // Smallest relative fall of the capped RMS error against kappa = 0 for a significant
-  // estimate.
-  double min_error_drop = 0.1;
+  // Smallest relative fall of the RMS error against kappa = 0 for a significant estimate.
+  // Measured on video and photos without distortion: 1.5 % (fox, a phone), 1.6 %
+  // (templeRing), 1.8 % (kitti07_160, rectified); with it (rendered, H.264): 9.6 % (480x270,
+  // f 432 px, k1 -0.12: 12 px at the corners), 29 % (96 degrees, k1 -0.07), 62 % (k1 -0.085).
+  double min_error_drop = 0.05;
   // Pairs used, at most (those whose points move most), and the fewest: fewer usable pairs
   // (with at least min_pair_points correspondences) give no estimate.
   int max_num_pairs = 300;
