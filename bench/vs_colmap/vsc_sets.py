@@ -28,6 +28,10 @@ SYNTH_SETS = {
     "street_degraded": ("street --frames 400 --shake 0.5 --jitter 2 --noise 4 "
                         "--blur 100-110:15,250-255:30 --low-texture 180-190 --dark 300-301 "
                         "--jpeg-quality 70"),
+    # An action camera: 96 degrees across the width, a barrel lens (run with --no-intrinsics to
+    # compare self-calibration; the truth is SIMPLE_RADIAL 640 360 288 320 180 -0.07).
+    "street_wide": ("street --video --frames 300 --width 640 --height 360 --focal-factor 0.45 "
+                    "--look-ahead 30 --shake 1 --noise 1 --camera-model SIMPLE_RADIAL --k1 -0.07"),
 }
 
 ALL_SETS = list(DATA_SETS) + list(SYNTH_SETS)
