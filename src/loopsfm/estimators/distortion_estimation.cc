@@ -245,17 +245,16 @@ RadialDistortionEstimate EstimateRadialDistortion(std::span<const PairCorrespond
   const double lo = options.min_kappa + std::max(best - 1, 0) * step;
   const double hi = options.min_kappa + std::min(best + 1, n - 1) * step;
   estimate.kappa = GoldenSectionMinimum(error_at, lo, hi, options.refine_tolerance);
-  estimate.error_px = error_at(estimate.kappa);
-  if (best_error < estimate.error_px) {  // the refinement found a worse local minimum
+  std::vector<double> at_estimate =
+      ErrorsAt(used, principal_point, unit, estimate.kappa, options.error_cap_px);
+  if (best_error < MaskedRms(at_estimate, {})) {  // the refinement found a worse local minimum
     estimate.kappa = options.min_kappa + best * step;
-    estimate.error_px = best_error;
+    at_estimate = ErrorsAt(used, principal_point, unit, estimate.kappa, options.error_cap_px);
   }
   // Significance on the points that fit at the estimate: a wrong match is capped whatever
   // kappa is, and counted it would only dilute the fall (10 random matches among 150 per
   // pair: 4 % instead of about 50 %).
   const double cap2 = options.error_cap_px * options.error_cap_px;
-  const std::vector<double> at_estimate =
-      ErrorsAt(used, principal_point, unit, estimate.kappa, options.error_cap_px);
   std::vector<char> fits(at_estimate.size());
   for (size_t i = 0; i < at_estimate.size(); ++i) fits[i] = at_estimate[i] < cap2;
   estimate.error_px = MaskedRms(at_estimate, fits);

@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 
 #include "loopsfm/geometry/epipolar.h"
+#include "loopsfm/geometry/rigid3.h"
 #include "loopsfm/math/random.h"
 
 namespace loopsfm {
@@ -12,12 +13,6 @@ namespace {
 
 constexpr double kTrueFocal = 800.0;
 constexpr int kWidth = 1280, kHeight = 720;
-
-Eigen::Matrix3d Skew(const Eigen::Vector3d& v) {
-  Eigen::Matrix3d m;
-  m << 0, -v.z(), v.y(), v.z(), 0, -v.x(), -v.y(), v.x(), 0;
-  return m;
-}
 
 struct Scene {
   MapperInput input;
