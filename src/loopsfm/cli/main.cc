@@ -3,6 +3,7 @@
 #include <cstdio>
 
 #include <CLI/CLI.hpp>
+#include <glog/logging.h>
 
 #include "loopsfm/cli/commands.h"
 #include "loopsfm/util/errors.h"
@@ -10,6 +11,9 @@
 
 int main(int argc, char** argv) {
   using namespace loopsfm;
+  FLAGS_logtostderr = true;
+  FLAGS_minloglevel = google::GLOG_ERROR;
+  google::InitGoogleLogging(argv[0]);
   CLI::App app{"loopsfm: camera poses and a sparse point cloud from video, with loop closing"};
   app.require_subcommand(1);
   // --threads, -v and -q work after the subcommand too (`loopsfm reconstruct ... -q`).
@@ -22,6 +26,10 @@ int main(int argc, char** argv) {
   app.parse_complete_callback([&] {
     SetupLogging(common.quiet ? Verbosity::kQuiet
                               : common.verbose ? Verbosity::kVerbose : Verbosity::kNormal);
+    // Ceres logs through glog (to the terminal, never to log files): its warnings (a linear
+    // solve that failed and was retried with more damping) are the solver's own business and
+    // show only with -v; its errors always do.
+    FLAGS_minloglevel = common.verbose ? google::GLOG_WARNING : google::GLOG_ERROR;
   });
 
   cli::AddReconstructCommand(app);
