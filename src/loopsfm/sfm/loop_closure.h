@@ -87,9 +87,10 @@ class LoopCloser {
   // refinement) so mapping can go on from a consistent map. Otherwise (after mapping, every
   // frame already registered) the loops found are gathered and corrected together by
   // CloseGathered: one pose graph over all their edges, their inlier point pairs fused, the
-  // other points of each track that now agree merged, and the caller refines once at the end. Without refine the model
-  // must not change between AfterRegistration calls: the evidence of the window's earlier
-  // registrations is kept from their own calls, not collected again.
+  // other points of each track that now agree merged, and the caller refines once at the
+  // end. Without refine the model must not change between AfterRegistration calls: the
+  // evidence of the window's earlier registrations is kept from their own calls, not
+  // collected again.
   LoopCloser(const MapperInput& input, const LoopClosureOptions& options,
              uint64_t seed = kDefaultRandomSeed, bool refine = true);
 
