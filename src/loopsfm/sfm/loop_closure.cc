@@ -400,7 +400,6 @@ bool LoopCloser::DetectAndClose(MapperState& model, image_t image_id, MapperRepo
     report->seconds_loop_detection -= loop.seconds;  // counted once, as closing
   } else {
     gathered_.insert(gathered_.end(), edges.begin(), edges.end());
-    gathered_pairs_.insert(gathered_pairs_.end(), inlier_pairs.begin(), inlier_pairs.end());
     gathered_loops_.push_back(report->loops_closed.size());
   }
   const std::string outcome =
@@ -433,7 +432,7 @@ bool LoopCloser::CloseGathered(MapperState& model, MapperReport* report) {
   // exactly (drift is no rigid motion); at full weight each, they would pull the old end out
   // of shape between them. Together they weigh as much as one loop's.
   const double weight = options_.loop_edge_weight / static_cast<double>(gathered_loops_.size());
-  const bool closed = Close(model, gathered_, weight, gathered_pairs_, report);
+  const bool closed = Close(model, gathered_, weight, {}, report);
   const long long after = static_cast<long long>(model.reconstruction().NumPoints3D());
   for (size_t k : gathered_loops_) report->loops_closed[k].num_points_after = after;
   const double seconds = timer.ElapsedSeconds();
@@ -441,7 +440,6 @@ bool LoopCloser::CloseGathered(MapperState& model, MapperReport* report) {
   spdlog::info("loop: {} loops corrected together ({} edges): points {} -> {}, {:.1f} s",
                gathered_loops_.size(), gathered_.size(), before, after, seconds);
   gathered_.clear();
-  gathered_pairs_.clear();
   gathered_loops_.clear();
   return closed;
 }
@@ -555,26 +553,10 @@ bool LoopCloser::Close(MapperState& model, const std::vector<LoopEdge>& loop_edg
   // holds the ends together; it relaxed a large correction back towards the drift (drift2,
   // focal -5 %: the same loop was closed 13 times). Observations a fused point cannot fit
   // are dropped after the bundle.
-  // A point may be in several pairs (an old point agreed with recent points of several
-  // stretches of the overlap): later pairs fuse into the point it became.
-  std::unordered_map<point3D_t, point3D_t> fused_into;
-  auto current_id = [&](point3D_t id) {
-    for (auto it = fused_into.find(id); it != fused_into.end(); it = fused_into.find(id)) {
-      id = it->second;
-    }
-    return id;
-  };
   size_t fused = 0;
   for (const PointPair& pair : fuse) {
-    const point3D_t old_id = current_id(pair.old_id), recent_id = current_id(pair.recent_id);
-    if (old_id == recent_id || !rec.ExistsPoint3D(old_id) || !rec.ExistsPoint3D(recent_id)) {
-      continue;
-    }
-    const point3D_t id = model.FusePoints(old_id, recent_id);
-    if (id == kInvalidPoint3DId) continue;
-    fused_into[old_id] = id;
-    fused_into[recent_id] = id;
-    ++fused;
+    if (!rec.ExistsPoint3D(pair.old_id) || !rec.ExistsPoint3D(pair.recent_id)) continue;
+    fused += model.FusePoints(pair.old_id, pair.recent_id) != kInvalidPoint3DId;
   }
   Timer timer;
   model.RetriangulateAll();

@@ -86,11 +86,10 @@ class LoopCloser {
   // refine (while mapping): each loop found is corrected at once (pose graph, then a global
   // refinement) so mapping can go on from a consistent map. Otherwise (after mapping, every
   // frame already registered) the loops found are gathered and corrected together by
-  // CloseGathered: one pose graph over all their edges, their inlier point pairs fused, the
-  // other points of each track that now agree merged, and the caller refines once at the
-  // end. Without refine the model must not change between AfterRegistration calls: the
-  // evidence of the window's earlier registrations is kept from their own calls, not
-  // collected again.
+  // CloseGathered: one pose graph over all their edges, then the points of each track that
+  // now agree are merged, and the caller refines once at the end. Without refine the model
+  // must not change between AfterRegistration calls: the evidence of the window's earlier
+  // registrations is kept from their own calls, not collected again.
   LoopCloser(const MapperInput& input, const LoopClosureOptions& options,
              uint64_t seed = kDefaultRandomSeed, bool refine = true);
 
@@ -101,8 +100,8 @@ class LoopCloser {
   // one without loop closing.
   bool AfterRegistration(MapperState& model, image_t image_id, MapperReport* report);
 
-  // Corrects the model for every loop gathered so far, in one pose graph, and fuses their
-  // inlier point pairs; returns true when there was one and the pose graph succeeded.
+  // Corrects the model for every loop gathered so far, in one pose graph; returns true when
+  // there was one and the pose graph succeeded.
   bool CloseGathered(MapperState& model, MapperReport* report);
 
   // Its state between registrations (random numbers, evidence window, cooldown), into and
@@ -161,7 +160,6 @@ class LoopCloser {
   // Without refine: the edges of the loops found and not yet corrected, and their entries in
   // the report's loops_closed.
   std::vector<LoopEdge> gathered_;
-  std::vector<PointPair> gathered_pairs_;  // their inlier point pairs, fused by the correction
   std::vector<size_t> gathered_loops_;
 };
 
