@@ -9,6 +9,7 @@
 
 #include "loopsfm/estimators/focal_estimation.h"
 #include "loopsfm/math/random.h"
+#include "loopsfm/scene/camera.h"
 #include "loopsfm/util/errors.h"
 
 namespace loopsfm {
@@ -17,10 +18,14 @@ namespace {
 constexpr int kWidth = 640, kHeight = 360;
 const Eigen::Vector2d kCentre(kWidth / 2.0, kHeight / 2.0);
 
-// SIMPLE_RADIAL's projection: focal f, principal point at the centre, radial term k.
-Eigen::Vector2d Project(const Eigen::Vector3d& in_camera, double focal, double k) {
-  const Eigen::Vector2d normalised = in_camera.hnormalized();
-  return kCentre + focal * normalised * (1.0 + k * normalised.squaredNorm());
+// A SIMPLE_RADIAL lens: focal f, principal point at the centre, radial term k.
+Camera Lens(double focal, double k) {
+  Camera camera;
+  camera.model_id = CameraModelId::kSimpleRadial;
+  camera.width = kWidth;
+  camera.height = kHeight;
+  camera.params = {focal, kCentre.x(), kCentre.y(), k};
+  return camera;
 }
 
 bool InImage(const Eigen::Vector2d& x) {
@@ -31,6 +36,7 @@ bool InImage(const Eigen::Vector2d& x) {
 // 1 unit, 150 points at depth 3..12, 0.5 px of noise; `num_outliers` wrong matches per pair.
 std::vector<PairCorrespondences> MakePairs(Random& random, int num_pairs, double focal, double k,
                                            int num_outliers = 0) {
+  const Camera lens = Lens(focal, k);
   std::vector<PairCorrespondences> pairs;
   while (static_cast<int>(pairs.size()) < num_pairs) {
     const Eigen::Vector3d axis = Eigen::Vector3d(random.Normal(0, 0.2), 1.0, random.Normal(0, 0.2))
@@ -45,7 +51,7 @@ std::vector<PairCorrespondences> MakePairs(Random& random, int num_pairs, double
                               random.UniformReal(3, 12));
       const Eigen::Vector3d in2 = R * X + t;
       if (in2.z() < 1.0) continue;
-      const Eigen::Vector2d x1 = Project(X, focal, k), x2 = Project(in2, focal, k);
+      const Eigen::Vector2d x1 = lens.ImgFromCam(X), x2 = lens.ImgFromCam(in2);
       if (!InImage(x1) || !InImage(x2)) continue;
       pair.points1.push_back(x1 + Eigen::Vector2d(random.Normal(0, 0.5), random.Normal(0, 0.5)));
       pair.points2.push_back(x2 + Eigen::Vector2d(random.Normal(0, 0.5), random.Normal(0, 0.5)));
