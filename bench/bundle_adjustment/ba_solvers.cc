@@ -5,9 +5,11 @@
 // length, the same draw for every solver). Rounds alternate the solvers, so a loaded machine
 // slows them alike.
 //
-//   ba_solvers OUT/sparse/0 [--rounds 3] [--noise 2] [--threads 0]
+//   ba_solvers OUT/sparse/0 [--rounds 3] [--noise 2] [--threads 0] [--only sparse_schur]
 //
 // Prints, per solver, the median wall time, iterations, and the final RMS reprojection error.
+// `--only NAME` runs one solver (dense_schur, sparse_schur, sparse_schur_3, iterative_schur),
+// for a profiler.
 
 #include <algorithm>
 #include <cmath>
@@ -59,7 +61,7 @@ void Disturb(Reconstruction* rec, double noise_px, uint64_t seed) {
 }
 
 constexpr const char* kUsage =
-    "usage: ba_solvers MODEL_DIR [--rounds N] [--noise PX] [--threads N]\n";
+    "usage: ba_solvers MODEL_DIR [--rounds N] [--noise PX] [--threads N] [--only SOLVER]\n";
 
 int Main(int argc, char** argv) {
   if (argc >= 2 && (std::string(argv[1]) == "--help" || std::string(argv[1]) == "-h")) {
@@ -71,6 +73,7 @@ int Main(int argc, char** argv) {
     return 2;
   }
   int rounds = 3, threads = 0;
+  std::string only;
   double noise_px = 2.0;
   for (int i = 2; i < argc; i += 2) {
     const std::string flag = argv[i];
@@ -81,6 +84,7 @@ int Main(int argc, char** argv) {
     if (flag == "--rounds") rounds = std::atoi(argv[i + 1]);
     else if (flag == "--noise") noise_px = std::atof(argv[i + 1]);
     else if (flag == "--threads") threads = std::atoi(argv[i + 1]);
+    else if (flag == "--only") only = argv[i + 1];
     else {
       std::fprintf(stderr, "unknown flag %s\n%s", flag.c_str(), kUsage);
       return 2;
@@ -109,12 +113,14 @@ int Main(int argc, char** argv) {
     bool full_gauge_block = false;
   };
   const std::vector<Variant> variants = {
+      {"dense_schur", BundleLinearSolver::kDenseSchur},
       {"sparse_schur", BundleLinearSolver::kSparseSchur},
       {"sparse_schur_3", BundleLinearSolver::kSparseSchur, true},
       {"iterative_schur", BundleLinearSolver::kIterativeSchur}};
   std::map<std::string, std::vector<double>> seconds;
   for (int round = 0; round < rounds; ++round) {
     for (const auto& [name, solver, full_gauge_block] : variants) {
+      if (!only.empty() && name != only) continue;
       Reconstruction rec = model;
       Disturb(&rec, noise_px, 17 + round);
       BundleAdjustmentConfig config;
