@@ -9,7 +9,7 @@
 //                      none lost or repeated; the model matches the ground truth joined by
 //                      those names.
 //   repeated facades   identical buildings along the walk must not close false loops nor
-//                      bend the path (disabled: it fails today, see the test).
+//                      bend the path.
 //
 // Figures measured when the tests were written are given with each test; the bounds follow
 // from the problem, with room for the machine's noise.

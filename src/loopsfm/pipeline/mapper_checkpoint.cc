@@ -84,7 +84,7 @@ nlohmann::json OptionsJson(const IncrementalMapperOptions& o) {
                         o.record_alternate_poses, o.registration_capture_window,
                         o.registration_neighbour_window}},
       {"structure", {o.max_reproj_error_px, o.min_tri_angle_deg}},
-      {"bundles", {o.local_ba_num_images, o.global_ba_growth, RefinementJson(o.refine_unknown),
+      {"bundles", {o.local_ba_num_images, o.global_ba_growth, o.global_ba_end_margin, RefinementJson(o.refine_unknown),
                    RefinementJson(o.refine_known), o.focal_prior_sigma_log}},
       {"models", {o.max_num_models, o.min_model_size, o.merge_max_reproj_error_px,
                   o.merge_min_num_inliers, o.merge_min_inlier_ratio}},

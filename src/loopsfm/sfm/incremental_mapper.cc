@@ -78,6 +78,7 @@ void IncrementalMapperOptions::Check() const {
   LOOPSFM_REQUIRE_OPTION(min_tri_angle_deg >= 0, "triangulation angle must not be negative");
   LOOPSFM_REQUIRE_OPTION(local_ba_num_images >= 1, "local bundle needs at least one image");
   LOOPSFM_REQUIRE_OPTION(global_ba_growth > 0, "global bundle growth must be positive");
+  LOOPSFM_REQUIRE_OPTION(global_ba_end_margin >= 0, "global bundle end margin must be 0 or more");
   LOOPSFM_REQUIRE_OPTION(registration_capture_window >= 0 && registration_neighbour_window >= 0,
                          "registration capture and neighbour windows must be >= 0, got {} and {}",
                          registration_capture_window, registration_neighbour_window);
@@ -369,7 +370,8 @@ class IncrementalMapper {
           // Closing ended with a global refinement.
           last_global_size = rec.NumRegImages();
           failed_at.clear();
-        } else if (rec.NumRegImages() >= last_global_size * (1.0 + options_.global_ba_growth)) {
+        } else if (rec.NumRegImages() >= last_global_size * (1.0 + options_.global_ba_growth) &&
+                   !GrowthEndsSoon(rec)) {
           model->GlobalRefinement(&report_);
           last_global_size = rec.NumRegImages();
           failed_at.clear();
@@ -395,6 +397,14 @@ class IncrementalMapper {
       failed_at.clear();
       refined_since_stall = true;
     }
+  }
+
+  // Whether the frames not in `rec` are few enough that the global bundle ending its growth
+  // (see global_ba_end_margin) can stand in for one the growth has just called for.
+  bool GrowthEndsSoon(const Reconstruction& rec) const {
+    const size_t in_model = rec.NumRegImages();
+    const size_t left = input_.frames.size() - std::min(input_.frames.size(), in_model);
+    return static_cast<double>(left) <= options_.global_ba_end_margin * in_model;
   }
 
   // Merges kept models pairwise, largest first, until no two agree.
