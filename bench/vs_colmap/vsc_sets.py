@@ -32,6 +32,19 @@ SYNTH_SETS = {
     # compare self-calibration; the truth is SIMPLE_RADIAL 640 360 288 320 180 -0.07).
     "street_wide": ("street --video --frames 300 --width 640 --height 360 --focal-factor 0.45 "
                     "--look-ahead 30 --shake 1 --noise 1 --camera-model SIMPLE_RADIAL --k1 -0.07"),
+    # Everything at once on a hand-held phone-like walk around two blocks: abrupt turns, blur
+    # (30 px at frames 300-305, too much for SIFT: no blurred frame verifies with a sharp one,
+    # in loopsfm or COLMAP), a washed-out stretch, noise, JPEG, and a barrel lens (truth
+    # SIMPLE_RADIAL 640 360 384 320 180 -0.12).
+    "street_figure8_hard": ("street --video --frames 500 --width 640 --height 360 "
+                            "--route figure8 --look-ahead 30 --abrupt-turns --shake 1 --jitter 2 "
+                            "--noise 4 --blur 100-110:20,300-305:30 --low-texture 200-215 "
+                            "--jpeg-quality 60 --camera-model SIMPLE_RADIAL --k1 -0.12 "
+                            "--focal-factor 0.6"),
+    # Two laps past identical buildings: true loops among look-alike places.
+    "street_repeated_laps": ("street --video --frames 500 --width 640 --height 360 "
+                             "--look-ahead 30 --repeated-facades --laps 2 --noise 3 "
+                             "--jpeg-quality 70 --shake 0.5"),
 }
 
 ALL_SETS = list(DATA_SETS) + list(SYNTH_SETS)
