@@ -61,7 +61,8 @@ void Disturb(Reconstruction* rec, double noise_px, uint64_t seed) {
 }
 
 constexpr const char* kUsage =
-    "usage: ba_solvers MODEL_DIR [--rounds N] [--noise PX] [--threads N] [--only SOLVER]\n";
+    "usage: ba_solvers MODEL_DIR [--rounds N] [--noise PX] [--threads N] [--only SOLVER]\n"
+    "  SOLVER: dense_schur, sparse_schur, sparse_schur_3 or iterative_schur\n";
 
 int Main(int argc, char** argv) {
   if (argc >= 2 && (std::string(argv[1]) == "--help" || std::string(argv[1]) == "-h")) {
@@ -94,15 +95,6 @@ int Main(int argc, char** argv) {
     std::fprintf(stderr, "need --rounds >= 1, --threads >= 0 and --noise >= 0\n");
     return 2;
   }
-  const Reconstruction model = ReadColmapModel(argv[1]);
-  std::vector<image_t> frames = model.RegImageIds();
-  std::sort(frames.begin(), frames.end());
-  if (frames.size() < 3) {
-    std::fprintf(stderr, "the model needs 3 or more registered frames\n");
-    return 2;
-  }
-  std::printf("%zu frames, %zu points, %zu observations, noise %.1f px\n", frames.size(),
-              model.NumPoints3D(), model.ComputeNumObservations(), noise_px);
   struct Variant {
     std::string name;
     BundleLinearSolver solver;
@@ -112,15 +104,30 @@ int Main(int argc, char** argv) {
     // SubsetManifold would not, and was 16 % slower).
     bool full_gauge_block = false;
   };
-  const std::vector<Variant> variants = {
+  std::vector<Variant> variants = {
       {"dense_schur", BundleLinearSolver::kDenseSchur},
       {"sparse_schur", BundleLinearSolver::kSparseSchur},
       {"sparse_schur_3", BundleLinearSolver::kSparseSchur, true},
       {"iterative_schur", BundleLinearSolver::kIterativeSchur}};
+  if (!only.empty()) {
+    std::erase_if(variants, [&](const Variant& v) { return v.name != only; });
+    if (variants.empty()) {
+      std::fprintf(stderr, "--only: no solver named %s\n%s", only.c_str(), kUsage);
+      return 2;
+    }
+  }
+  const Reconstruction model = ReadColmapModel(argv[1]);
+  std::vector<image_t> frames = model.RegImageIds();
+  std::sort(frames.begin(), frames.end());
+  if (frames.size() < 3) {
+    std::fprintf(stderr, "the model needs 3 or more registered frames\n");
+    return 2;
+  }
+  std::printf("%zu frames, %zu points, %zu observations, noise %.1f px\n", frames.size(),
+              model.NumPoints3D(), model.ComputeNumObservations(), noise_px);
   std::map<std::string, std::vector<double>> seconds;
   for (int round = 0; round < rounds; ++round) {
     for (const auto& [name, solver, full_gauge_block] : variants) {
-      if (!only.empty() && name != only) continue;
       Reconstruction rec = model;
       Disturb(&rec, noise_px, 17 + round);
       BundleAdjustmentConfig config;

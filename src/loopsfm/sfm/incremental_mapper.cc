@@ -402,8 +402,8 @@ class IncrementalMapper {
   // Whether the frames not in `rec` are few enough that the global bundle ending its growth
   // (see global_ba_end_margin) can stand in for one the growth has just called for.
   bool GrowthEndsSoon(const Reconstruction& rec) const {
-    const size_t in_model = rec.NumRegImages();
-    const size_t left = input_.frames.size() - std::min(input_.frames.size(), in_model);
+    const size_t in_model = rec.NumRegImages();  // never more than the input's frames
+    const size_t left = input_.frames.size() - in_model;
     return static_cast<double>(left) <= options_.global_ba_end_margin * in_model;
   }
 
