@@ -151,10 +151,10 @@ def retriangulated_model(src, dst, truth):
         t = [-c for c in mat_vec(cam_from_world, centre)]
         # The quaternion of cam_from_world is the conjugate of world_from_cam's.
         w, x, y, z = quaternion_from_rotation(world_from_cam)
-        images_out.append(' '.join([f[0]] + ['%.17g' % v for v in (w, -x, -y, -z)] +
-                                   ['%.17g' % v for v in t] + f[8:]) + '\n' + points + '\n')
-        camera = cameras[f[8]]
         p = points.split()
+        images_out.append((' '.join([f[0]] + ['%.17g' % v for v in (w, -x, -y, -z)] +
+                                    ['%.17g' % v for v in t] + f[8:]), p))
+        camera = cameras[f[8]]
         for i in range(0, len(p) - 2, 3):
             if p[i + 2] == '-1':
                 continue
@@ -167,9 +167,7 @@ def retriangulated_model(src, dst, truth):
     os.makedirs(dst, exist_ok=True)
     with open(os.path.join(dst, 'cameras.txt'), 'w') as out:
         out.writelines(l for l in open(os.path.join(src, 'cameras.txt')))
-    with open(os.path.join(dst, 'images.txt'), 'w') as out:
-        out.writelines(images_out)
-    kept = dropped = 0
+    kept, dropped = 0, set()
     with open(os.path.join(dst, 'points3D.txt'), 'w') as out:
         for line in open(os.path.join(src, 'points3D.txt')):
             if line.startswith('#') or not line.strip():
@@ -185,13 +183,18 @@ def retriangulated_model(src, dst, truth):
                         a[r][c] += p
                         b[r] += p * centre[c]
             point = solve3(a, b) if len(rays.get(f[0], [])) >= 2 else None
-            if point is None:
-                dropped += 1  # kept with its old coordinates: the adjuster still needs the id
-                point = [float(v) for v in f[1:4]]
-            else:
-                kept += 1
+            if point is None:  # parallel rays from the true poses: the point is left out
+                dropped.add(f[0])
+                continue
+            kept += 1
             out.write(' '.join([f[0]] + ['%.17g' % v for v in point] + f[4:]) + '\n')
-    return kept, dropped
+    with open(os.path.join(dst, 'images.txt'), 'w') as out:
+        for head, p in images_out:
+            for i in range(2, len(p), 3):
+                if p[i] in dropped:
+                    p[i] = '-1'
+            out.write(head + '\n' + ' '.join(p) + '\n')
+    return kept, len(dropped)
 
 
 def bundle(colmap, src, dst, iterations, log):
