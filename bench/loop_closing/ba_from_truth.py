@@ -245,7 +245,7 @@ def main():
     truth_txt = os.path.join(args.out, 'truth_start_txt')
     kept, dropped = retriangulated_model(model_txt, truth_txt, truth)
     print(f'{kept} tracks triangulated from the ground-truth poses ({dropped} could not be)')
-    print(f'model:                      {evaluate(args.loopsfm, args.model, args.groundtruth)}')
+    print(f"{'model:':24s} {evaluate(args.loopsfm, args.model, args.groundtruth)}")
     for label, start in (('from the model', model_txt), ('from the truth', truth_txt)):
         out = os.path.join(args.out, 'bundled_' + label.split()[-1])
         costs, iterations = bundle(args.colmap, start, out, args.iterations, out + '.log')
