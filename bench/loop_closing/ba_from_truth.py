@@ -174,16 +174,17 @@ def retriangulated_model(src, dst, truth):
             if line.startswith('#') or not line.strip():
                 continue
             f = line.split()
+            track = rays.get(f[0], [])
             # Least squares over the rays: sum_i (I - d_i d_i^T) X = sum_i (I - d_i d_i^T) c_i.
             a = [[0.0] * 3 for _ in range(3)]
             b = [0.0] * 3
-            for centre, d in rays.get(f[0], []):
+            for centre, d in track:
                 for r in range(3):
                     for c in range(3):
                         p = (1.0 if r == c else 0.0) - d[r] * d[c]
                         a[r][c] += p
                         b[r] += p * centre[c]
-            point = solve3(a, b) if len(rays.get(f[0], [])) >= 2 else None
+            point = solve3(a, b) if len(track) >= 2 else None
             if point is None:  # parallel rays from the true poses: the point is left out
                 dropped.add(f[0])
                 continue
