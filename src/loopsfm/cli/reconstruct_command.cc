@@ -16,6 +16,17 @@ namespace {
 void PrintSummary(const ReconstructReport& report) {
   std::string out = "\n";
   out += fmt::format("{:<28}{}\n", "frames", report.num_frames);
+  const ExtractReport& e = report.extract;
+  if (e.frames_read > 0 && e.frames_read != e.frames_decoded) {
+    out += fmt::format("{:<28}{} of {} read ({} judged blurred); {} in-between added\n",
+                       "keyframes", e.frames_decoded, e.frames_read, e.frames_blurred,
+                       report.fill_in_frames);
+  }
+  if (report.localize.frames_read > 0) {
+    out += fmt::format("{:<28}{} of {} between keyframes\n", "localised frames",
+                       report.localize.localized,
+                       report.localize.localized + report.localize.not_localized);
+  }
   for (size_t m = 0; m < report.output.models.size(); ++m) {
     const ModelSummary& s = report.output.models[m];
     out += fmt::format("{:<28} {} registered, {} points, track length {:.2f}, reprojection "
@@ -129,6 +140,9 @@ void AddReconstructCommand(CLI::App& app) {
     bool withhold_loop_pairs = false;
     bool alternate_poses = false;
     bool overwrite = false;
+    bool all_frames = false;
+    bool localized_in_model = false;
+    int fill_in_rounds = 3;
     double checkpoint_every = 60.0;
     uint64_t seed = kDefaultRandomSeed;
   };
@@ -170,6 +184,20 @@ void AddReconstructCommand(CLI::App& app) {
                 "Evaluation: map without the pairs between frames 50 or more apart, then add "
                 "them and close the loops at the end (drift grows unchecked until then; compare "
                 "with --loop-closing none)");
+  cmd->add_option("--fill-in-rounds", flags->fill_in_rounds,
+                  "Adaptive keyframes: rounds of in-between frames added where two consecutive "
+                  "kept frames do not verify (the middle frame of the gap, then of its halves); "
+                  "0: none")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+  cmd->add_flag("--all-frames", flags->all_frames,
+                "A pose for every frame: after mapping, the frames between keyframes are "
+                "tracked from the keyframe before them and localised against the map; they go "
+                "to trajectory.txt, transforms.json and images/ (and OUT/localized.txt), not to "
+                "the COLMAP model unless --localized-in-model");
+  cmd->add_flag("--localized-in-model", flags->localized_in_model,
+                "With --all-frames: also put the localised frames into sparse/0 and the gsplat "
+                "layout (as images without observations)");
   cmd->add_flag("--overwrite", flags->overwrite,
                 "Start again: delete OUT/database.db and OUT/mapper_checkpoint.bin first instead "
                 "of resuming from them (needed when the input or the extract / match options "
@@ -215,6 +243,13 @@ void AddReconstructCommand(CLI::App& app) {
     options.mapper.record_alternate_poses = flags->alternate_poses;
     options.mapper.seed = flags->seed;
     options.overwrite = flags->overwrite;
+    if (flags->localized_in_model && !flags->all_frames) {
+      throw InvalidArgument("--localized-in-model puts the frames that --all-frames localises "
+                            "into the model: add --all-frames");
+    }
+    options.all_frames = flags->all_frames;
+    options.output.localized_in_model = flags->localized_in_model;
+    options.fill_in_rounds = flags->fill_in_rounds;
     options.checkpoint_interval_seconds = flags->checkpoint_every;
     options.self_calibrate = !flags->no_self_calibration;
     options.output.formats = ParseExportFormats(flags->export_formats);

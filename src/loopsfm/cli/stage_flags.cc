@@ -17,11 +17,25 @@ void AddExtractFlags(CLI::App* cmd, ExtractFlags* flags) {
   cmd->add_option("--camera-model", flags->camera_model,
                   "Camera model without --intrinsics (default SIMPLE_RADIAL): " +
                       CameraModelNameList());
-  cmd->add_option("--every", flags->options.keyframes.every,
-                  "Keep one frame in N (the sharpest of each window)")
-      ->capture_default_str();
+  cmd->add_option("--keyframes", flags->keyframes,
+                  "Which frames to keep: auto (default: adaptive for a video, every image of a "
+                  "folder) | adaptive (a new keyframe when the view has moved: parallax or "
+                  "overlap, the sharpest frame near that point) | windows (one frame in every "
+                  "--every N)");
+  flags->every = cmd->add_option("--every", flags->options.keyframes.every,
+                                 "Keep one frame in N, the sharpest of each window (fixed windows "
+                                 "instead of adaptive keyframes; 1 keeps every frame)")
+                     ->capture_default_str();
   cmd->add_flag("--first-of-window", flags->first_of_window,
                 "With --every, keep the first frame of each window instead of the sharpest");
+  cmd->add_option("--keyframe-parallax", flags->options.keyframes.adaptive.min_parallax_deg,
+                  "Adaptive keyframes: a new keyframe once the median parallax (the part of the "
+                  "motion of tracked corners that no rotation explains) reaches this many degrees")
+      ->capture_default_str();
+  cmd->add_option("--keyframe-overlap", flags->options.keyframes.adaptive.min_tracked_fraction,
+                  "Adaptive keyframes: ... or once fewer than this fraction of the last "
+                  "keyframe's corners are still tracked")
+      ->capture_default_str();
   cmd->add_option("--upscale", flags->options.sift.upscale,
                   "Upscale frames by this factor before SIFT (low-resolution video)")
       ->capture_default_str();
@@ -37,6 +51,19 @@ void AddExtractFlags(CLI::App* cmd, ExtractFlags* flags) {
 ExtractOptions ExtractFlags::Resolve() const {
   ExtractOptions resolved = options;
   resolved.keyframes.sharpest = !first_of_window;
+  if (!keyframes.empty()) resolved.keyframes.mode = ParseKeyframeMode(keyframes);
+  if (every != nullptr && every->count() > 0) {
+    if (resolved.keyframes.mode == KeyframeMode::kAdaptive) {
+      throw InvalidArgument(fmt::format("--every {} keeps fixed windows: it cannot be combined "
+                                        "with --keyframes adaptive; drop one of them",
+                                        resolved.keyframes.every));
+    }
+    resolved.keyframes.mode = KeyframeMode::kWindows;
+  }
+  if (first_of_window && resolved.keyframes.mode != KeyframeMode::kWindows) {
+    throw InvalidArgument("--first-of-window applies to fixed windows: add --every N (or "
+                          "--keyframes windows)");
+  }
   resolved.sift.root_sift = !no_root_sift;
   resolved.num_threads = Common().threads;
   resolved.show_progress = !Common().quiet;

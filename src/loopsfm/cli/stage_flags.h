@@ -15,6 +15,9 @@ struct ExtractFlags {
   std::string intrinsics;
   std::string camera_model;
   ExtractOptions options;
+  // Empty: auto (adaptive for a video, every image of a folder; windows when --every is given).
+  std::string keyframes;
+  CLI::Option* every = nullptr;
   bool first_of_window = false;
   bool no_root_sift = false;
   // Options with the flags applied (reads the intrinsics file).

@@ -23,6 +23,10 @@ namespace loopsfm {
 namespace fs = std::filesystem;
 namespace {
 
+image_t MaxImageId(const Reconstruction& model) {
+  return model.Images().empty() ? 0 : model.Images().rbegin()->first;
+}
+
 constexpr std::pair<ExportFormat, std::string_view> kFormatNames[] = {
     {ExportFormat::kColmap, "colmap"},         {ExportFormat::kPly, "ply"},
     {ExportFormat::kTum, "tum"},               {ExportFormat::kImages, "images"},
@@ -211,21 +215,39 @@ std::set<ExportFormat> ParseExportFormats(const std::string& list) {
 
 void ExportOptions::Check() const { undistort.Check(); }
 
-ExportReport Export(std::vector<Reconstruction>* models, const std::vector<std::string>& frames,
+ExportReport Export(std::vector<Reconstruction>* models, const std::vector<std::string>& kept_frames,
                     const fs::path& frames_source, const fs::path& output_dir,
-                    const ExportOptions& options) {
+                    const ExportOptions& options, const std::vector<LocalizedFrame>& localized) {
   options.Check();
   Timer timer;
   ExportReport report;
   if (models->empty()) return report;
   auto wants = [&](ExportFormat f) { return options.formats.count(f) > 0; };
+  // Model 0 with its localised frames as registered images without observations: what the
+  // trajectory and transforms.json show (and the COLMAP model, when asked).
+  std::optional<Reconstruction> model0_all;
+  std::vector<std::string> frames = kept_frames;
+  for (const LocalizedFrame& frame : localized) {
+    if (frame.pose.model != 0) continue;
+    if (!model0_all) model0_all = (*models)[0];
+    Image image;
+    image.image_id = static_cast<image_t>(MaxImageId(*model0_all) + 1);
+    image.camera_id = frame.pose.camera_id;
+    image.name = frame.name;
+    image.cam_from_world = frame.pose.cam_from_world;
+    model0_all->AddImage(std::move(image));
+    model0_all->RegisterImage(static_cast<image_t>(MaxImageId(*model0_all)));
+    frames.push_back(frame.name);
+  }
   const Reconstruction& model0 = (*models)[0];
+  const Reconstruction& path0 = model0_all ? *model0_all : model0;
+  const Reconstruction& written0 = options.localized_in_model ? path0 : model0;
   // Formats that cannot be written fail before anything is.
   std::optional<nlohmann::json> transforms;
   if (wants(ExportFormat::kNerfstudio)) {
     NerfstudioOptions ns;
     if (!wants(ExportFormat::kPly) && !fs::exists(output_dir / "points.ply")) ns.ply_file_path = "";
-    transforms = NerfstudioTransforms(model0, ns);
+    transforms = NerfstudioTransforms(path0, ns);
   }
 
   // One pass over the frames for images, gsplat and colours.
@@ -242,7 +264,7 @@ ExportReport Export(std::vector<Reconstruction>* models, const std::vector<std::
     if (write_gsplat) {
       undistorted.emplace(output_dir / "undistorted");
       CreateFolder(undistorted->path() / "images");
-      gsplat.emplace(model0, undistorted->path() / "images", options.undistort);
+      gsplat.emplace(written0, undistorted->path() / "images", options.undistort);
     }
     Colorizer colorizer(models);
     std::unordered_map<std::string, bool> seen;
@@ -295,8 +317,9 @@ ExportReport Export(std::vector<Reconstruction>* models, const std::vector<std::
     for (size_t m = 0; m < models->size(); ++m) {
       const fs::path dir = sparse.path() / std::to_string(m);
       CreateFolder(dir);
-      WriteColmapModelBinary(dir, (*models)[m]);
-      if (options.write_text) WriteColmapModelText(dir, (*models)[m]);
+      const Reconstruction& model = m == 0 ? written0 : (*models)[m];
+      WriteColmapModelBinary(dir, model);
+      if (options.write_text) WriteColmapModelText(dir, model);
     }
     sparse.Commit();
     report.written.push_back(output_dir / "sparse");
@@ -309,7 +332,7 @@ ExportReport Export(std::vector<Reconstruction>* models, const std::vector<std::
     report.written.push_back(output_dir / "points.ply");
   }
   if (wants(ExportFormat::kTum)) {
-    WriteTrajectoryFile(output_dir / "trajectory.txt", TrajectoryFromReconstruction(model0));
+    WriteTrajectoryFile(output_dir / "trajectory.txt", TrajectoryFromReconstruction(path0));
     report.written.push_back(output_dir / "trajectory.txt");
   }
   if (transforms) {
@@ -375,7 +398,25 @@ ExportReport ExportRun(const fs::path& output_dir, const std::optional<fs::path>
         output_dir.string(), output_dir.string(), recorded_source.value_or("none").string()));
   }
   if (!needs_frames) source.clear();
-  return Export(&models, frames, source, output_dir, run_options);
+  // The frames localised between keyframes (--all-frames), in model 0's camera.
+  std::vector<LocalizedFrame> localized;
+  if (fs::exists(output_dir / "localized.txt")) {
+    if (models[0].Cameras().size() != 1) {
+      spdlog::warn("{}/localized.txt is left out: model 0 has {} cameras, and the file does not "
+                   "say which one each frame used",
+                   output_dir.string(), models[0].Cameras().size());
+    } else {
+      const camera_t camera_id = models[0].Cameras().begin()->first;
+      for (const TrajectoryEntry& entry : ReadTrajectoryFile(output_dir / "localized.txt")) {
+        LocalizedFrame frame;
+        frame.name = entry.name;
+        frame.pose.camera_id = camera_id;
+        frame.pose.cam_from_world = entry.world_from_cam.Inverse();
+        localized.push_back(std::move(frame));
+      }
+    }
+  }
+  return Export(&models, frames, source, output_dir, run_options, localized);
 }
 
 std::string ExportReport::Counts() const {

@@ -2,7 +2,8 @@
 // What a run leaves for other tools, written from the models (largest first) and the frames:
 //   colmap      OUT/sparse/<k>/{cameras,images,points3D}.bin (+ .txt with write_text)
 //   ply         OUT/points.ply: coloured points of model 0
-//   tum         OUT/trajectory.txt: camera-to-world poses of model 0, by frame name
+//   tum         OUT/trajectory.txt: camera-to-world poses of model 0 (and of the frames
+//               localised in it), by frame name
 //   images      OUT/images/<name>: every kept frame, named as in the models (a video's frames
 //               as PNG; an image folder's files copied as they are)
 //   nerfstudio  OUT/transforms.json for model 0, pointing at images/ and points.ply
@@ -20,6 +21,7 @@
 #include <string_view>
 #include <vector>
 
+#include "loopsfm/pipeline/localize.h"
 #include "loopsfm/pipeline/undistort.h"
 #include "loopsfm/scene/reconstruction.h"
 
@@ -41,6 +43,10 @@ struct ExportOptions {
   UndistortOptions undistort;
   // Read the frames again to give the 3D points the mean colour of their observations.
   bool colorize = true;
+  // Localised frames (--all-frames) also go into the COLMAP model 0 and the undistorted
+  // layout, as registered images without observations; otherwise only into the
+  // trajectory, transforms.json and images/.
+  bool localized_in_model = false;
   void Check() const;
 };
 
@@ -70,12 +76,17 @@ struct ExportReport {
 // images, gsplat or colours need pixels). With no model, nothing earlier is touched.
 // Throws InvalidArgument for a format the models cannot be written in, StorageError when
 // the output cannot be written, InputError when the source lacks a frame.
+// `localized` are the frames localised between keyframes (pipeline/localize.h); those of
+// model 0 join its trajectory, transforms.json and images/ (and the model itself when
+// options.localized_in_model).
 ExportReport Export(std::vector<Reconstruction>* models, const std::vector<std::string>& frames,
                     const std::filesystem::path& frames_source,
-                    const std::filesystem::path& output_dir, const ExportOptions& options);
+                    const std::filesystem::path& output_dir, const ExportOptions& options,
+                    const std::vector<LocalizedFrame>& localized = {});
 
 // Exports an earlier run again from what OUT holds (OUT/sparse/<k>, OUT/database.db), without
-// recomputing anything. Frames are read from `frames_source` when given, else from OUT/images
+// recomputing anything, with the localised frames of OUT/localized.txt when it is there.
+// Frames are read from `frames_source` when given, else from OUT/images
 // when it holds them, else from the video or folder the run was made from. Throws InputError
 // when OUT holds no model, or a format needs frames and none of these has them, and
 // InvalidArgument for the report (it needs the run itself).

@@ -2,10 +2,13 @@
 #include "loopsfm/pipeline/fingerprint.h"
 
 #include <map>
+#include <set>
 #include <unordered_set>
 
+#include <nlohmann/json.hpp>
 #include <opencv2/core.hpp>
 #include <tbb/global_control.h>
+#include <tbb/parallel_for.h>
 #include <tbb/parallel_pipeline.h>
 
 #include "loopsfm/util/errors.h"
@@ -88,14 +91,70 @@ struct WorkItem {
   FeatureSet features;
 };
 
+// Writes one frame with its camera, features and origin, in one transaction.
+void StoreFrame(const Keyframe& keyframe, int width, int height, const FeatureSet& features,
+                CameraRegistry& cameras, Database& database) {
+  const RawFrame& raw = keyframe.frame;
+  Frame frame;
+  frame.name = raw.name;
+  frame.camera_id = cameras.CameraFor(width, height, raw.name);
+  Database::Transaction transaction(database);
+  frame.image_id = database.WriteFrame(frame);
+  database.WriteFeatures(frame.image_id, features);
+  database.WriteFrameOrigin(frame.image_id, {raw.source_index, keyframe.sharpness,
+                                             std::string(KeyframeReasonName(keyframe.reason))});
+  transaction.Commit();
+}
+
 }  // namespace
+
+ExtractReport ExtractFillInFrames(const std::filesystem::path& input, Database& database,
+                                  const ExtractOptions& options,
+                                  const std::vector<int>& source_indices) {
+  Timer timer;
+  ExtractReport report;
+  std::set<int> wanted(source_indices.begin(), source_indices.end());
+  if (wanted.empty()) return report;
+  CameraRegistry cameras(database, options.intrinsics, options.camera_model);
+  std::unique_ptr<FrameSource> source = OpenFrameSource(input);
+  std::vector<Keyframe> frames;
+  while (!wanted.empty()) {
+    std::optional<RawFrame> raw = source->Next();
+    if (!raw) break;
+    if (!wanted.erase(raw->source_index)) continue;
+    const double sharpness = FrameSharpness(raw->image);
+    frames.push_back(Keyframe{std::move(*raw), sharpness, KeyframeReason::kFillIn});
+  }
+  if (!wanted.empty()) {
+    throw InputError(fmt::format("frame {} of '{}' could not be read again for a fill-in; the "
+                                 "source changed since extraction: start again with --overwrite",
+                                 *wanted.begin(), input.string()));
+  }
+  std::vector<FeatureSet> features(frames.size());
+  tbb::parallel_for(size_t(0), frames.size(), [&](size_t i) {
+    features[i] = ExtractSift(PrepareSiftInput(frames[i].frame.image, options.sift), options.sift);
+  });
+  for (size_t i = 0; i < frames.size(); ++i) {
+    const cv::Mat& image = frames[i].frame.image;
+    StoreFrame(frames[i], image.cols, image.rows, features[i], cameras, database);
+    ++report.frames_extracted;
+    report.num_features += features[i].Size();
+  }
+  report.frames_decoded = static_cast<int>(frames.size());
+  report.seconds = timer.ElapsedSeconds();
+  return report;
+}
 
 ExtractReport ExtractFeatures(const std::filesystem::path& input, Database& database,
                               const ExtractOptions& options) {
   options.Check();
   Timer timer;
   std::unique_ptr<FrameSource> source = OpenFrameSource(input);
-  KeyframeSelector selector(*source, options.keyframes);
+  KeyframeOptions keyframe_options = options.keyframes;
+  if (options.intrinsics && keyframe_options.adaptive.focal_length_px == 0.0) {
+    keyframe_options.adaptive.focal_length_px = options.intrinsics->MeanFocalLength();
+  }
+  KeyframeSelector selector(*source, keyframe_options);
   CameraRegistry cameras(database, options.intrinsics, options.camera_model);
 
   const int threads = options.num_threads > 0 ? options.num_threads
@@ -111,7 +170,11 @@ ExtractReport ExtractFeatures(const std::filesystem::path& input, Database& data
   database.WriteMeta("source_kind", source->Info().kind == SourceKind::kVideo ? "video" : "images");
   // Where the frames come from, for exports that need their pixels again (`loopsfm export`).
   database.WriteMeta("source_path", std::filesystem::absolute(input).lexically_normal().string());
-  const int expected = source->Info().expected_frames / options.keyframes.every;
+  const KeyframeMode mode = ResolvedKeyframeMode(options.keyframes, source->Info().kind);
+  // Adaptive selection keeps an unknown number of frames: the bar shows a count only.
+  const int expected = mode == KeyframeMode::kAdaptive
+                           ? 0
+                           : source->Info().expected_frames / options.keyframes.every;
   Progress progress("extract", expected > 0 ? expected : 0, options.show_progress);
   ExtractReport report;
   // Names of frames stored with features by an earlier run. Read up front: the database is
@@ -159,15 +222,8 @@ ExtractReport ExtractFeatures(const std::filesystem::path& input, Database& data
                     ++report.frames_resumed;
                     return;
                   }
-                  Frame frame;
-                  frame.name = raw.name;
-                  frame.camera_id = cameras.CameraFor(item->width, item->height, raw.name);
-                  Database::Transaction transaction(database);
-                  frame.image_id = database.WriteFrame(frame);
-                  database.WriteFeatures(frame.image_id, item->features);
-                  database.WriteFrameOrigin(frame.image_id,
-                                            {raw.source_index, item->keyframe.sharpness});
-                  transaction.Commit();
+                  StoreFrame(item->keyframe, item->width, item->height, item->features,
+                             cameras, database);
                   ++report.frames_extracted;
                   report.num_features += item->features.Size();
                 }));
@@ -177,6 +233,17 @@ ExtractReport ExtractFeatures(const std::filesystem::path& input, Database& data
   }
   cv::setNumThreads(previous_cv_threads);
   progress.Finish();
+  report.frames_read = mode == KeyframeMode::kAdaptive ? selector.Summary().frames_read
+                                                       : report.frames_decoded;
+  if (mode == KeyframeMode::kAdaptive) {
+    // What the report draws along the video: how many frames there were, which were blurred.
+    const KeyframeSummary& summary = selector.Summary();
+    database.WriteMeta("keyframes", nlohmann::json{{"mode", "adaptive"},
+                                                   {"frames_read", summary.frames_read},
+                                                   {"blurred", summary.blurred}}
+                                        .dump());
+    report.frames_blurred = static_cast<int>(summary.blurred.size());
+  }
   report.unreadable_images = source->NumSkipped();
   report.num_cameras = static_cast<int>(database.NumCameras());
   report.seconds = timer.ElapsedSeconds();

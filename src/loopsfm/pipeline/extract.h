@@ -7,6 +7,7 @@
 #include <filesystem>
 #include <functional>
 #include <optional>
+#include <vector>
 
 #include "loopsfm/feature/sift.h"
 #include "loopsfm/scene/camera.h"
@@ -32,6 +33,8 @@ struct ExtractOptions {
 };
 
 struct ExtractReport {
+  int frames_read = 0;         // frames of the source looked at (adaptive keyframes)
+  int frames_blurred = 0;      // of which judged blurred (adaptive keyframes)
   int frames_decoded = 0;      // keyframes taken from the source
   int frames_extracted = 0;    // of which features were extracted now
   int frames_resumed = 0;      // of which were already in the database
@@ -47,5 +50,12 @@ struct ExtractReport {
 
 ExtractReport ExtractFeatures(const std::filesystem::path& input, Database& database,
                               const ExtractOptions& options);
+
+// Extracts the frames of `input` at the given source indices (frames between keyframes) and
+// stores them as fill-ins (KeyframeReason::kFillIn), with the cameras and SIFT options of
+// ExtractFeatures. Throws InputError when a frame cannot be read (the source changed).
+ExtractReport ExtractFillInFrames(const std::filesystem::path& input, Database& database,
+                                  const ExtractOptions& options,
+                                  const std::vector<int>& source_indices);
 
 }  // namespace loopsfm

@@ -50,7 +50,7 @@ nlohmann::json ExtractFingerprint(const fs::path& input, const ExtractOptions& o
                   {"height", options.intrinsics->height},
                   {"params", options.intrinsics->params}};
   }
-  return {{"source", SourceIdentity(input)},
+  nlohmann::json fingerprint = {{"source", SourceIdentity(input)},
           {"every", options.keyframes.every},
           {"sharpest", options.keyframes.sharpest},
           {"sift",
@@ -63,6 +63,23 @@ nlohmann::json ExtractFingerprint(const fs::path& input, const ExtractOptions& o
             {"max_image_size", sift.max_image_size}}},
           {"camera_model", std::string(CameraModelName(options.camera_model))},
           {"intrinsics", intrinsics}};
+  // Windows leave the fingerprint as it was before adaptive keyframes, so older databases
+  // made with --every resume.
+  if (ResolvedKeyframeMode(options.keyframes, OpenFrameSource(input)->Info().kind) ==
+      KeyframeMode::kAdaptive) {
+    const AdaptiveKeyframeOptions& a = options.keyframes.adaptive;
+    fingerprint["keyframes"] = {{"mode", "adaptive"},
+                                {"min_parallax_deg", a.min_parallax_deg},
+                                {"min_tracked_fraction", a.min_tracked_fraction},
+                                {"min_tracked_corners", a.min_tracked_corners},
+                                {"max_corners", a.max_corners},
+                                {"analysis_size", a.analysis_size},
+                                {"blur_fraction", a.blur_fraction},
+                                {"lookback_seconds", a.lookback_seconds},
+                                {"max_defer_seconds", a.max_defer_seconds},
+                                {"focal_length_px", a.focal_length_px}};
+  }
+  return fingerprint;
 }
 
 nlohmann::json MatchFingerprint(const MatchOptions& options) {

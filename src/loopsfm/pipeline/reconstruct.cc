@@ -1,6 +1,8 @@
 #include "loopsfm/pipeline/reconstruct.h"
 
+#include <algorithm>
 #include <fstream>
+#include <set>
 #include <unordered_map>
 
 #include "loopsfm/eval/trajectory_metrics.h"
@@ -72,6 +74,82 @@ void WriteRegistrationRounds(const fs::path& path, const std::vector<Registratio
   }
 }
 
+namespace {
+
+// Consecutive kept frames (capture order) without a verified pair between them: the source
+// index of each gap's middle frame; gaps with no frame between them are counted in
+// `unfillable`.
+std::vector<int> UnverifiedGapMiddles(const Database& database, int* unfillable) {
+  std::set<std::pair<image_t, image_t>> verified;
+  for (const VerifiedPair& pair : database.ReadVerifiedPairs()) {
+    verified.insert(std::minmax(pair.pair.image_id1, pair.pair.image_id2));
+  }
+  const auto origins = database.ReadFrameOrigins();
+  const std::vector<Frame> frames = FramesInCaptureOrder(database);
+  std::vector<int> middles;
+  *unfillable = 0;
+  for (size_t i = 1; i < frames.size(); ++i) {
+    const image_t a = frames[i - 1].image_id, b = frames[i].image_id;
+    if (verified.count(std::minmax(a, b))) continue;
+    const auto from = origins.find(a), to = origins.find(b);
+    if (from == origins.end() || to == origins.end()) continue;
+    const int64_t first = from->second.source_index, last = to->second.source_index;
+    if (last - first >= 2) {
+      middles.push_back(static_cast<int>((first + last) / 2));
+    } else {
+      ++*unfillable;
+    }
+  }
+  return middles;
+}
+
+FrameTimeline ReadFrameTimeline(const Database& database, int frames_read) {
+  FrameTimeline timeline;
+  timeline.frames_read = frames_read;
+  for (const auto& [id, origin] : database.ReadFrameOrigins()) {
+    timeline.kept.emplace_back(static_cast<int>(origin.source_index), origin.reason);
+  }
+  std::sort(timeline.kept.begin(), timeline.kept.end());
+  if (!timeline.kept.empty()) {
+    timeline.frames_read = std::max(timeline.frames_read, timeline.kept.back().first + 1);
+  }
+  if (const std::optional<std::string> meta = database.ReadMeta("keyframes")) {
+    const nlohmann::json summary = nlohmann::json::parse(*meta, nullptr, false);
+    if (summary.is_object() && summary.contains("blurred") && summary["blurred"].is_array()) {
+      for (const auto& index : summary["blurred"]) {
+        if (index.is_number_integer()) timeline.blurred.push_back(index.get<int>());
+      }
+    }
+  }
+  return timeline;
+}
+
+}  // namespace
+
+void FillInGaps(const fs::path& input, Database& database, const ReconstructOptions& options,
+                ReconstructReport* report) {
+  for (int round = 0; round < options.fill_in_rounds; ++round) {
+    const std::vector<int> middles = UnverifiedGapMiddles(database, &report->fill_in_unfilled);
+    if (middles.empty()) break;
+    const ExtractReport extracted =
+        ExtractFillInFrames(input, database, options.extract, middles);
+    report->fill_in_frames += extracted.frames_extracted;
+    const MatchReport matched = MatchPairs(database, options.match);
+    spdlog::info("fill-in round {}: {} in-between frame{} where kept frames did not verify, "
+                 "{} pairs matched",
+                 round + 1, middles.size(), middles.size() == 1 ? "" : "s",
+                 matched.num_pairs_matched);
+  }
+  // What is still broken after the last round.
+  const std::vector<int> left = UnverifiedGapMiddles(database, &report->fill_in_unfilled);
+  report->fill_in_unfilled += static_cast<int>(left.size());
+  if (report->fill_in_frames > 0 || report->fill_in_unfilled > 0) {
+    spdlog::info("fill-in: {} in-between frames added; {} gaps between kept frames still "
+                 "without a verified pair",
+                 report->fill_in_frames, report->fill_in_unfilled);
+  }
+}
+
 ReconstructReport Reconstruct(const fs::path& input, const fs::path& output_dir,
                               const ReconstructOptions& options) {
   options.Check();
@@ -117,6 +195,12 @@ ReconstructReport Reconstruct(const fs::path& input, const fs::path& output_dir,
                report.match.num_pairs_matched, report.match.num_pairs_resumed,
                report.match.num_pairs_verified, report.match.MeanInliers());
 
+  if (options.fill_in_rounds > 0 && database.ReadMeta("keyframes")) {
+    stage.Restart();
+    FillInGaps(input, database, options, &report);
+    report.stage_times.push_back({"fill-in", stage.ElapsedSeconds()});
+  }
+
   stage.Restart();
   MapperInput mapper_input = LoadMapperInput(database, &report.tracks);
   report.stage_times.push_back({"tracks", stage.ElapsedSeconds()});
@@ -161,10 +245,30 @@ ReconstructReport Reconstruct(const fs::path& input, const fs::path& output_dir,
                  mapper_input.frames.size(), mapper_input.pairs.size());
   }
 
+  // A pose for every frame; none from an earlier run is left behind when this one has none.
+  const fs::path localized_path = output_dir / "localized.txt";
+  std::vector<LocalizedFrame> localized;
+  fs::remove(localized_path);
+  if (options.all_frames && !models.empty()) {
+    stage.Restart();
+    localized = LocalizeSkippedFrames(input, database, models, options.localize,
+                                      options.show_progress, &report.localize);
+    report.stage_times.push_back({"localise", stage.ElapsedSeconds()});
+    const LocalizeReport& l = report.localize;
+    spdlog::info("localise: {} of the {} frames between keyframes got a pose ({} did not), "
+                 "{:.1f} ms a frame",
+                 l.localized, l.localized + l.not_localized, l.not_localized,
+                 1000.0 * l.seconds / std::max(1, l.frames_read));
+  }
+
   stage.Restart();
   std::vector<std::string> frame_names;
   for (const MapperFrame& frame : mapper_input.frames) frame_names.push_back(frame.name);
-  report.output = Export(&models, frame_names, input, output_dir, options.output);
+  report.output = Export(&models, frame_names, input, output_dir, options.output, localized);
+  if (options.all_frames && !models.empty()) {
+    WriteTrajectoryFile(localized_path, LocalizedTrajectory(localized));
+    report.output.written.push_back(localized_path);
+  }
   report.stage_times.push_back({"export", stage.ElapsedSeconds()});
   report.total_seconds = total.ElapsedSeconds();
   report.peak_memory_bytes = PeakResidentBytes();
@@ -183,6 +287,8 @@ ReconstructReport Reconstruct(const fs::path& input, const fs::path& output_dir,
   } else {
     fs::remove(output_dir / "registrations.csv");
   }
+  report.timeline = ReadFrameTimeline(database, report.extract.frames_read);
+  for (const LocalizedFrame& frame : localized) report.timeline.localized.push_back(frame.source_index);
   if (options.output.formats.count(ExportFormat::kReport)) {
     stage.Restart();
     WriteHtmlReport(output_dir / "report.html",

@@ -14,6 +14,7 @@
 
 #include "loopsfm/pipeline/export.h"
 #include "loopsfm/pipeline/extract.h"
+#include "loopsfm/pipeline/localize.h"
 #include "loopsfm/pipeline/match.h"
 #include "loopsfm/sfm/incremental_mapper.h"
 #include "loopsfm/sfm/self_calibration.h"
@@ -23,6 +24,13 @@ namespace loopsfm {
 struct ReconstructOptions {
   ExtractOptions extract;
   MatchOptions match;
+  // Adaptive keyframes: rounds of in-between frames added where two consecutive kept frames
+  // have no verified pair (a fast turn, a blurred stretch): the middle frame of the gap is
+  // extracted and matched, and again in the halves that still break; 0: none.
+  int fill_in_rounds = 3;
+  // After mapping, give every frame between keyframes a pose (pipeline/localize.h).
+  bool all_frames = false;
+  FrameLocalizerOptions localize;
   // Estimate the focal length of cameras without --intrinsics before mapping.
   bool self_calibrate = true;
   SelfCalibrationOptions self_calibration;
@@ -48,10 +56,29 @@ struct StageTime {
 };
 
 
+// Every frame of the source along the video, for the report: which were kept and why, which
+// were judged blurred, which were localised between keyframes (--all-frames).
+struct FrameTimeline {
+  // Frames of the source: all that adaptive selection read, else up to the last kept one.
+  int frames_read = 0;
+  // Source index and KeyframeReasonName of each kept frame, in source order ("" for frames
+  // of databases older than the reasons).
+  std::vector<std::pair<int, std::string>> kept;
+  // Source indices judged blurred by adaptive selection (kept or not).
+  std::vector<int> blurred;
+  // Source indices of the frames localised between keyframes (any model).
+  std::vector<int> localized;
+};
+
 struct ReconstructReport {
   size_t num_frames = 0;
   ExtractReport extract;
   MatchReport match;
+  // In-between frames added by the fill-in rounds, and the gaps left unfilled.
+  int fill_in_frames = 0;
+  int fill_in_unfilled = 0;
+  LocalizeReport localize;
+  FrameTimeline timeline;
   TrackBuildReport tracks;
   SelfCalibrationReport self_calibration;
   MapperReport mapper;
@@ -65,6 +92,12 @@ struct ReconstructReport {
 ReconstructReport Reconstruct(const std::filesystem::path& input,
                               const std::filesystem::path& output_dir,
                               const ReconstructOptions& options);
+
+// The fill-in rounds of ReconstructOptions::fill_in_rounds on a matched database: extract
+// and match the middle frame of each gap between consecutive kept frames that have no
+// verified pair, until none is left or the rounds are spent.
+void FillInGaps(const std::filesystem::path& input, Database& database,
+                const ReconstructOptions& options, ReconstructReport* report);
 
 // The alternate pose diagnostic as CSV: one line per registration, both rounds.
 void WriteRegistrationRounds(const std::filesystem::path& path,

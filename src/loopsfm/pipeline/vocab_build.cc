@@ -48,6 +48,7 @@ VocabularyTree BuildVocabulary(const std::vector<std::filesystem::path>& inputs,
     } else {
       std::unique_ptr<FrameSource> source = OpenFrameSource(input);
       KeyframeOptions keyframes;
+      keyframes.mode = KeyframeMode::kWindows;
       keyframes.every = options.every;
       KeyframeSelector selector(*source, keyframes);
       while (auto keyframe = selector.Next()) {

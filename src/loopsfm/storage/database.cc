@@ -241,21 +241,37 @@ size_t Database::NumFrames() const { return CountRows("SELECT COUNT(*) FROM imag
 
 void Database::WriteFrameOrigin(image_t image_id, const FrameOrigin& source) {
   sqlite3_stmt* stmt = Prepare(
-      "INSERT OR REPLACE INTO loopsfm_frames(image_id, source_index, sharpness) VALUES(?, ?, ?)");
+      "INSERT OR REPLACE INTO loopsfm_frames(image_id, source_index, sharpness, reason) "
+      "VALUES(?, ?, ?, ?)");
   StatementScope scope(stmt);
   BindId(stmt, 1, image_id);
   BindId(stmt, 2, source.source_index);
   Check(stmt, sqlite3_bind_double(stmt, 3, source.sharpness), "binding a double");
+  Check(stmt, sqlite3_bind_text(stmt, 4, source.reason.data(),
+                                static_cast<int>(source.reason.size()), SQLITE_STATIC),
+        "binding text");
   Step(stmt);
 }
 
 std::optional<FrameOrigin> Database::ReadFrameOrigin(image_t image_id) const {
   sqlite3_stmt* stmt =
-      Prepare("SELECT source_index, sharpness FROM loopsfm_frames WHERE image_id = ?");
+      Prepare("SELECT source_index, sharpness, reason FROM loopsfm_frames WHERE image_id = ?");
   StatementScope scope(stmt);
   BindId(stmt, 1, image_id);
   if (!Step(stmt)) return std::nullopt;
-  return FrameOrigin{sqlite3_column_int64(stmt, 0), sqlite3_column_double(stmt, 1)};
+  return FrameOrigin{sqlite3_column_int64(stmt, 0), sqlite3_column_double(stmt, 1),
+                     ColumnText(stmt, 2)};
+}
+
+std::unordered_map<image_t, FrameOrigin> Database::ReadFrameOrigins() const {
+  sqlite3_stmt* stmt = Prepare("SELECT image_id, source_index, sharpness, reason FROM loopsfm_frames");
+  StatementScope scope(stmt);
+  std::unordered_map<image_t, FrameOrigin> origins;
+  while (Step(stmt)) {
+    origins[static_cast<image_t>(sqlite3_column_int64(stmt, 0))] = FrameOrigin{
+        sqlite3_column_int64(stmt, 1), sqlite3_column_double(stmt, 2), ColumnText(stmt, 3)};
+  }
+  return origins;
 }
 
 // ---- features ---------------------------------------------------------------------------

@@ -22,7 +22,9 @@
 //
 // loopsfm's own tables (ignored by COLMAP):
 //   loopsfm_meta(key, value)                         text key/value, incl. schema_version
-//   loopsfm_frames(image_id, source_index, sharpness) where a frame came from in the video
+//   loopsfm_frames(image_id, source_index, sharpness, reason) where a frame came from in the
+//       video and why it was kept (video/keyframes.h: window, first, parallax, overlap,
+//       tracking-lost, last, fill-in; empty in databases older than the column)
 //
 // Threading: a Database is used from one thread at a time (the pipeline serialises all
 // reads and writes through one owner). It is movable, not copyable.
@@ -56,6 +58,8 @@ struct FrameOrigin {
   int64_t source_index = -1;
   // Sharpness score used by keyframe selection (variance of the Laplacian).
   double sharpness = 0.0;
+  // Why the frame was kept (KeyframeReasonName in video/keyframes.h); empty when unknown.
+  std::string reason;
 };
 
 // A verified pair's summary, read without decoding any blob.
@@ -105,6 +109,8 @@ class Database {
 
   void WriteFrameOrigin(image_t image_id, const FrameOrigin& source);
   std::optional<FrameOrigin> ReadFrameOrigin(image_t image_id) const;
+  // Every frame's origin, by image id (frames without one are absent).
+  std::unordered_map<image_t, FrameOrigin> ReadFrameOrigins() const;
 
   // Features. Replaces the frame's keypoints and descriptors in one step; the descriptor
   // rows must match the keypoints (or be empty, to store keypoints only).

@@ -54,7 +54,7 @@ constexpr const char* kCreateTables[] = {
     "CREATE TABLE IF NOT EXISTS loopsfm_meta (key TEXT PRIMARY KEY NOT NULL, value TEXT)",
     "CREATE TABLE IF NOT EXISTS loopsfm_frames ("
     " image_id INTEGER PRIMARY KEY NOT NULL, source_index INTEGER NOT NULL,"
-    " sharpness REAL NOT NULL,"
+    " sharpness REAL NOT NULL, reason TEXT NOT NULL DEFAULT '',"
     " FOREIGN KEY(image_id) REFERENCES images(image_id) ON DELETE CASCADE)",
 };
 
@@ -220,6 +220,11 @@ Database Database::Open(const std::string& path) {
     const bool fresh = database.CountRows(
                            "SELECT COUNT(*) FROM sqlite_master WHERE name = 'cameras'") == 0;
     database.CreateTables();
+    // Databases written before frames recorded why they were kept get the column, empty.
+    if (database.CountRows("SELECT COUNT(*) FROM pragma_table_info('loopsfm_frames') "
+                           "WHERE name = 'reason'") == 0) {
+      database.Exec("ALTER TABLE loopsfm_frames ADD COLUMN reason TEXT NOT NULL DEFAULT ''");
+    }
     if (fresh) {
       database.Exec(fmt::format("PRAGMA user_version = {}", kColmapUserVersion).c_str());
     }

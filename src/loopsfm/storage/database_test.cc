@@ -220,12 +220,36 @@ TEST_F(DatabaseTest, FramesAreIdempotentByName) {
   EXPECT_THROW(db.WriteFrame({kInvalidImageId, 42, "no_camera.png"}), StorageError);
   EXPECT_EQ(db.NumFrames(), 3u);
 
-  db.WriteFrameOrigin(b, {10, 123.5});
+  db.WriteFrameOrigin(b, {10, 123.5, "parallax"});
   const auto source = db.ReadFrameOrigin(b);
   ASSERT_TRUE(source.has_value());
   EXPECT_EQ(source->source_index, 10);
   EXPECT_EQ(source->sharpness, 123.5);
+  EXPECT_EQ(source->reason, "parallax");
   EXPECT_FALSE(db.ReadFrameOrigin(a).has_value());
+  const auto all = db.ReadFrameOrigins();
+  ASSERT_EQ(all.size(), 1u);
+  EXPECT_EQ(all.at(b).reason, "parallax");
+}
+
+// A database written before frames recorded why they were kept gets the column on opening;
+// its frames read back with an empty reason.
+TEST_F(DatabaseTest, FrameOriginsWithoutReasonColumnAreUpgraded) {
+  image_t b = 0;
+  {
+    Database db = Database::Open(path_);
+    b = AddTwoFrames(db).second;
+    db.WriteFrameOrigin(b, {7, 1.0, "first"});
+  }
+  RawExec(path_, "CREATE TABLE old AS SELECT image_id, source_index, sharpness FROM loopsfm_frames;"
+                 "DROP TABLE loopsfm_frames; ALTER TABLE old RENAME TO loopsfm_frames;");
+  Database db = Database::Open(path_);
+  const auto source = db.ReadFrameOrigin(b);
+  ASSERT_TRUE(source.has_value());
+  EXPECT_EQ(source->source_index, 7);
+  EXPECT_EQ(source->reason, "");
+  db.WriteFrameOrigin(b, {7, 1.0, "fill-in"});
+  EXPECT_EQ(db.ReadFrameOrigin(b)->reason, "fill-in");
 }
 
 TEST_F(DatabaseTest, FeaturesRoundTrip) {

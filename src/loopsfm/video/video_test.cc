@@ -1,8 +1,10 @@
 #include <gtest/gtest.h>
 
 #include <cstdlib>
+#include <algorithm>
 #include <filesystem>
 #include <fstream>
+#include <iostream>
 
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
@@ -100,6 +102,7 @@ TEST(Keyframes, SharpestFrameOfEachWindowIsKept) {
   const fs::path video = WriteVideo(FreshDir("sharp"), 9, /*blur_odd=*/true);
   auto source = OpenFrameSource(video);
   KeyframeOptions options;
+  options.mode = KeyframeMode::kWindows;
   options.every = 2;
   KeyframeSelector selector(*source, options);
   std::vector<int> kept;
@@ -111,8 +114,154 @@ TEST(Keyframes, SharpestFrameOfEachWindowIsKept) {
 TEST(Keyframes, BlurLowersSharpness) {
   EXPECT_GT(FrameSharpness(TestFrame(0, false)), 2.0 * FrameSharpness(TestFrame(0, true)));
   KeyframeOptions bad;
+  bad.mode = KeyframeMode::kWindows;
   bad.every = 0;
   EXPECT_THROW(bad.Check(), InvalidArgument);
+  KeyframeOptions mixed;  // fixed windows and adaptive keyframes at once
+  mixed.mode = KeyframeMode::kAdaptive;
+  mixed.every = 3;
+  EXPECT_THROW(mixed.Check(), InvalidArgument);
+  EXPECT_THROW(ParseKeyframeMode("sometimes"), InvalidArgument);
+  EXPECT_EQ(ParseKeyframeMode("adaptive"), KeyframeMode::kAdaptive);
+  for (const KeyframeReason reason :
+       {KeyframeReason::kWindow, KeyframeReason::kFirst, KeyframeReason::kParallax,
+        KeyframeReason::kOverlap, KeyframeReason::kTrackingLost, KeyframeReason::kLast,
+        KeyframeReason::kFillIn}) {
+    EXPECT_EQ(ParseKeyframeReason(KeyframeReasonName(reason)), reason);
+  }
+  EXPECT_FALSE(ParseKeyframeReason("because").has_value());
+}
+
+// Frames made in memory: two textured layers sliding sideways, the far one (top half) at
+// `far_px` and the near one (bottom half) at `near_px` pixels per frame, as a camera walking
+// past a wall with another behind it sees them. Equal speeds look like a turn of the camera
+// (no parallax); different speeds are parallax. Frames in `blurred` are motion-blurred.
+class SlidingLayers : public FrameSource {
+ public:
+  SlidingLayers(int num_frames, double far_px, double near_px, double fps,
+                std::pair<int, int> blurred = {-1, -1})
+      : num_frames_(num_frames), far_px_(far_px), near_px_(near_px), blurred_(blurred) {
+    info_.kind = SourceKind::kVideo;
+    info_.fps = fps;
+    info_.expected_frames = num_frames;
+    far_ = Texture(1, 4000);
+    near_ = Texture(2, 4000);
+  }
+  std::optional<RawFrame> Next() override {
+    if (next_ >= num_frames_) return std::nullopt;
+    const int i = next_++;
+    cv::Mat frame(kHeight, kWidth, CV_8UC3);
+    Slide(far_, far_px_ * i).rowRange(0, kHeight / 2).copyTo(frame.rowRange(0, kHeight / 2));
+    Slide(near_, near_px_ * i).rowRange(kHeight / 2, kHeight).copyTo(frame.rowRange(kHeight / 2, kHeight));
+    if (i >= blurred_.first && i <= blurred_.second) {
+      cv::blur(frame, frame, cv::Size(15, 1));
+    }
+    return RawFrame{i, VideoFrameName(i), frame};
+  }
+  bool Skip() override { return next_++ < num_frames_; }
+
+  static constexpr int kWidth = 320, kHeight = 240;
+
+ private:
+  static cv::Mat Texture(int seed, int width) {
+    cv::Mat noise(kHeight, width, CV_8UC3);
+    cv::RNG rng(seed);
+    rng.fill(noise, cv::RNG::UNIFORM, 0, 255);
+    cv::GaussianBlur(noise, noise, cv::Size(0, 0), 2.0);
+    cv::normalize(noise, noise, 0, 255, cv::NORM_MINMAX);
+    return noise;
+  }
+  // The frame-wide window of `texture` starting `offset` pixels in (sub-pixel: bilinear).
+  static cv::Mat Slide(const cv::Mat& texture, double offset) {
+    const cv::Mat m = (cv::Mat_<double>(2, 3) << 1, 0, -offset, 0, 1, 0);
+    cv::Mat out;
+    cv::warpAffine(texture, out, m, cv::Size(kWidth, kHeight), cv::INTER_LINEAR);
+    return out;
+  }
+  int num_frames_, next_ = 0;
+  double far_px_, near_px_;
+  std::pair<int, int> blurred_;
+  cv::Mat far_, near_;
+};
+
+std::vector<Keyframe> AdaptiveKeyframes(FrameSource& source, KeyframeSummary* summary = nullptr) {
+  KeyframeOptions options;
+  options.mode = KeyframeMode::kAdaptive;
+  KeyframeSelector selector(source, options);
+  std::vector<Keyframe> keyframes;
+  while (auto keyframe = selector.Next()) keyframes.push_back(std::move(*keyframe));
+  if (summary) *summary = selector.Summary();
+  if (std::getenv("LOOPSFM_TEST_VERBOSE")) {
+    for (const Keyframe& k : keyframes) {
+      std::cerr << k.frame.source_index << ":" << KeyframeReasonName(k.reason) << " ";
+    }
+    std::cerr << "\n";
+  }
+  return keyframes;
+}
+
+int CountReason(const std::vector<Keyframe>& keyframes, KeyframeReason reason) {
+  return static_cast<int>(std::count_if(keyframes.begin(), keyframes.end(),
+                                        [&](const Keyframe& k) { return k.reason == reason; }));
+}
+
+TEST(AdaptiveKeyframes, StandingStillKeepsOneFrame) {
+  SlidingLayers source(60, 0.0, 0.0, 30.0);
+  const std::vector<Keyframe> keyframes = AdaptiveKeyframes(source);
+  ASSERT_EQ(keyframes.size(), 1u);
+  EXPECT_EQ(keyframes[0].reason, KeyframeReason::kFirst);
+}
+
+// Both layers at one speed: a turn, no parallax. Keyframes come only as the view moves on
+// (the tracked corners leave the frame), about every half frame width.
+TEST(AdaptiveKeyframes, TurningGivesKeyframesByOverlapNotParallax) {
+  SlidingLayers source(120, 4.0, 4.0, 30.0);  // 480 px: one and a half frame widths
+  const std::vector<Keyframe> keyframes = AdaptiveKeyframes(source);
+  EXPECT_EQ(CountReason(keyframes, KeyframeReason::kParallax), 0);
+  EXPECT_GE(CountReason(keyframes, KeyframeReason::kOverlap), 2);
+  EXPECT_LE(keyframes.size(), 8u);
+  for (size_t i = 1; i < keyframes.size(); ++i) {
+    EXPECT_GT(keyframes[i].frame.source_index, keyframes[i - 1].frame.source_index);
+  }
+}
+
+// Layers at different speeds: parallax. Twice the difference gives more keyframes, and the
+// same motion filmed at twice the frame rate gives about the same keyframes.
+TEST(AdaptiveKeyframes, ParallaxGivesKeyframesIndependentOfFrameRate) {
+  SlidingLayers slow(90, 0.5, 1.5, 30.0), fast(90, 0.5, 2.5, 30.0), fast60(180, 0.25, 0.75, 60.0);
+  const std::vector<Keyframe> slow_keys = AdaptiveKeyframes(slow);
+  const std::vector<Keyframe> fast_keys = AdaptiveKeyframes(fast);
+  const std::vector<Keyframe> fast60_keys = AdaptiveKeyframes(fast60);
+  ASSERT_GE(slow_keys.size(), 2u);
+  EXPECT_GE(CountReason(slow_keys, KeyframeReason::kParallax), 1);
+  EXPECT_GT(fast_keys.size(), slow_keys.size());
+  EXPECT_NEAR(static_cast<double>(fast60_keys.size()), static_cast<double>(slow_keys.size()), 1.0);
+  // The 60 fps keyframes sit where the 30 fps ones do, in time (two 60 fps frames a 30 fps one).
+  const size_t common = std::min(fast60_keys.size(), slow_keys.size());
+  ASSERT_GE(common, 2u);
+  for (size_t i = 0; i < common; ++i) {
+    EXPECT_NEAR(fast60_keys[i].frame.source_index / 2.0, slow_keys[i].frame.source_index, 3.0);
+  }
+}
+
+// A blurred stretch: no blurred frame is kept while sharp ones are near, and the summary
+// marks the stretch.
+TEST(AdaptiveKeyframes, BlurredFramesAreNotKeptWhenSharpOnesAreClose) {
+  SlidingLayers source(150, 1.0, 3.0, 30.0, {50, 60});
+  KeyframeSummary summary;
+  const std::vector<Keyframe> keyframes = AdaptiveKeyframes(source, &summary);
+  EXPECT_EQ(summary.frames_read, 150);
+  EXPECT_EQ(summary.keyframes, static_cast<int>(keyframes.size()));
+  for (int i = 50; i <= 60; ++i) {
+    EXPECT_NE(std::find(summary.blurred.begin(), summary.blurred.end(), i), summary.blurred.end())
+        << "frame " << i << " is blurred";
+  }
+  for (const Keyframe& keyframe : keyframes) {
+    const int index = keyframe.frame.source_index;
+    EXPECT_FALSE(index >= 50 && index <= 60) << "blurred frame " << index << " kept ("
+                                              << KeyframeReasonName(keyframe.reason) << ")";
+  }
+  EXPECT_GE(keyframes.size(), 3u);
 }
 
 TEST(FrameSource, FolderIsSortedAndUnreadableImagesAreSkipped) {
