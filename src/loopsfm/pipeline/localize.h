@@ -9,6 +9,7 @@
 #include <string>
 #include <vector>
 
+#include "loopsfm/scene/dataset_files.h"
 #include "loopsfm/sfm/frame_localizer.h"
 #include "loopsfm/storage/database.h"
 

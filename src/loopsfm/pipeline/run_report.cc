@@ -135,6 +135,17 @@ nlohmann::json RunReportData(const ReconstructReport& report,
                              {"correction_scale", loop.correction_scale},
                              {"seconds", loop.seconds}});
   }
+  // Every frame of the source, as index lists rather than an object per frame: a video
+  // has tens of thousands.
+  const FrameTimeline& timeline = report.timeline;
+  if (timeline.frames_read > 0) {
+    nlohmann::json kept = nlohmann::json::array();
+    for (const auto& [index, reason] : timeline.kept) kept.push_back(nlohmann::json::array({index, reason}));
+    data["timeline"] = {{"frames_read", timeline.frames_read},
+                        {"kept", std::move(kept)},
+                        {"blurred", timeline.blurred},
+                        {"localized", timeline.localized}};
+  }
   if (models.empty()) return data;
   data["cameras"] = ReportCameras(models[0]);
   data["points"] = ReportPoints(models[0]);

@@ -4,6 +4,7 @@
 import { perFrameChart, registrationChart, stagesChart, topViewChart } from './charts.js';
 import { el, fmt, fmtSeconds, isNumber, keyValueTable, section } from './dom.js';
 import { scene3d } from './scene3d.js';
+import { classifyFrames, timelineCaption, timelineChart } from './timeline.js';
 
 function header(data) {
   const s = data.summary || {};
@@ -123,6 +124,14 @@ function main() {
     frameCanvas = perFrameChart(card3, frames);
   }
 
+  let timelineCanvas = null;
+  if (isNumber(data.timeline?.frames_read) && data.timeline.frames_read > 0) {
+    const sourceFrames = classifyFrames(data.timeline);
+    const card = section('timeline', 'Keyframes along the video', timelineCaption(sourceFrames));
+    root.append(card);
+    timelineCanvas = timelineChart(card, sourceFrames);
+  }
+
   if (frames.some((f) => isNumber(f.registration_inlier_ratio))) {
     const card = section('registration', 'Alternate poses',
       'inlier ratio of each registration, and of a second RANSAC over the correspondences it rejected; triangles mark a second plausible pose');
@@ -137,6 +146,7 @@ function main() {
     canvas3d: pageRect(view?.canvas),
     topView: pageRect(topCanvas),
     perFrame: pageRect(frameCanvas),
+    timeline: pageRect(timelineCanvas),
     stages: pageRect(stagesCanvas),
   });
   hooks.ready = true;

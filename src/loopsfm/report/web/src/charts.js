@@ -25,7 +25,7 @@ Chart.defaults.font.family = 'system-ui, sans-serif';
 Chart.defaults.maintainAspectRatio = false;
 
 // A canvas in a box of fixed height; Chart.js fills the box.
-function chartBox(parent, className) {
+export function chartBox(parent, className) {
   const canvas = el('canvas');
   parent.append(el('div', { class: `chart ${className}` }, canvas));
   return canvas;

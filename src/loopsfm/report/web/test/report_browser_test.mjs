@@ -3,7 +3,10 @@
 //   - no console error or warning, no page error, no request other than file: and data:;
 //   - the 3D canvas and the plots drew: each region of a screenshot has a share of pixels
 //     that differ from the region's background colour;
-//   - a click on a camera (frustum) names that frame in #selected-camera and highlights it.
+//   - a click on a camera (frustum) names that frame in #selected-camera and highlights it;
+//   - the keyframes along the video: the run's, and those of a made-up 20,000-frame video
+//     with every kind of frame, whose caption counts are known (screenshot beside the first,
+//     its name ending _timeline.png).
 //
 //   node report_browser_test.mjs REPORT_HTML SCREENSHOT_PNG
 //
@@ -32,7 +35,7 @@ if (!fs.existsSync(executablePath)) {
 // every screenshot.
 const kChromiumArgs = ['--use-angle=swiftshader', '--enable-unsafe-swiftshader'];
 // Least share of non-background pixels in each region (the drawings cover far more).
-const kMinShare = { canvas3d: 0.01, topView: 0.01, perFrame: 0.01, stages: 0.01 };
+const kMinShare = { canvas3d: 0.01, topView: 0.01, perFrame: 0.01, timeline: 0.01, stages: 0.01 };
 
 const failures = [];
 const fail = (message) => {
@@ -78,9 +81,26 @@ function countColour(png, rect, rgb, tolerance = 40) {
   return n;
 }
 
-const started = Date.now();
-const browser = await chromium.launch({ executablePath, headless: true, args: kChromiumArgs });
-try {
+// The timeline of a made-up video of 20,000 frames: a keyframe every 20 frames (every 20th
+// of those for overlap, two after tracking was lost), one fill-in, three of an old database
+// (no reason), 21 frames blurred around the first tracking loss and 950 localised between
+// frames 10,000 and 11,000.
+function madeUpTimeline() {
+  const kept = [[0, 'first'], [30, ''], [50, ''], [70, ''], [7010, 'fill-in'], [19999, 'last']];
+  for (let i = 20; i <= 19980; i += 20) {
+    kept.push([i, i === 5020 || i === 12020 ? 'tracking-lost' : i % 400 === 200 ? 'overlap' : 'parallax']);
+  }
+  kept.sort((a, b) => a[0] - b[0]);
+  const blurred = Array.from({ length: 21 }, (_, k) => 5000 + k);
+  const localized = Array.from({ length: 999 }, (_, k) => 10001 + k).filter((i) => i % 20 !== 0);
+  return { frames_read: 20000, kept, blurred, localized };
+}
+const kMadeUpCaption = '1,005 of 20,000 frames kept (947 parallax, 50 overlap, 2 tracking lost, 1 fill-in, '
+  + '2 first / last, 3 reason not recorded), 21 blurred, 950 localised';
+
+// A page that fails the test on a console error or warning, a page error or a request other
+// than file: and data: (the report must open offline).
+async function reportPage(browser) {
   const page = await browser.newPage({ viewport: { width: 1280, height: 900 }, deviceScaleFactor: 1 });
   page.on('console', (message) => {
     if (message.type() === 'error' || message.type() === 'warning') {
@@ -88,14 +108,25 @@ try {
     }
   });
   page.on('pageerror', (error) => fail(`page error: ${error.message}`));
-  // Offline: the report may load nothing but itself and data: URLs.
   await page.route('**/*', (route) => {
     const url = route.request().url();
     if (url.startsWith('file:') || url.startsWith('data:')) return route.continue();
     fail(`request outside the file: ${url}`);
     return route.abort();
   });
+  return page;
+}
 
+// Title and caption of the keyframes section, null when it is left out.
+const timelineSection = (page) => page.evaluate(() => {
+  const card = document.getElementById('timeline');
+  return card && { title: card.querySelector('h2').textContent, caption: card.querySelector('.note').textContent };
+});
+
+const started = Date.now();
+const browser = await chromium.launch({ executablePath, headless: true, args: kChromiumArgs });
+try {
+  const page = await reportPage(browser);
   await page.goto(pathToFileURL(path.resolve(reportPath)).href);
   await page.waitForFunction(() => window.loopsfmReport && window.loopsfmReport.ready, null, { timeout: 30000 });
   // One viewport for the whole page: page and viewport pixels are then the same.
@@ -113,6 +144,17 @@ try {
     const share = nonBackgroundShare(png, regions[name]);
     console.log(`region ${name}: ${(100 * share).toFixed(1)} % of its pixels drawn`);
     if (!(share >= minShare)) fail(`region ${name} looks empty: ${(100 * share).toFixed(2)} % drawn, want >= ${100 * minShare} %`);
+  }
+
+  // The run's keyframes: the caption counts what the data holds.
+  const timeline = await page.evaluate(() => window.LOOPSFM_REPORT.timeline);
+  const shownTimeline = await timelineSection(page);
+  console.log(`keyframes along the video: "${shownTimeline?.caption}"`);
+  if (!timeline || !shownTimeline) {
+    fail('no keyframes along the video (data.timeline or section #timeline missing)');
+  } else {
+    const want = `${timeline.kept.length.toLocaleString('en-US')} of ${timeline.frames_read.toLocaleString('en-US')} frames kept`;
+    if (!shownTimeline.caption.startsWith(want)) fail(`keyframes caption "${shownTimeline.caption}", want "${want} ..."`);
   }
 
   // Click a camera: the middle one of those in view.
@@ -163,6 +205,37 @@ try {
   if (sparse.sections.join(',') !== 'summary,per-frame' || sparse.regions.canvas3d || !sparse.regions.perFrame) {
     fail(`with little data, want the sections summary and per-frame only, got ${sparse.sections.join(', ')}`);
   }
+
+  // The same report with the timeline of a long video in place of the run's: it draws, with
+  // its counts, in a blink.
+  const longVideo = await reportPage(browser);
+  await longVideo.addInitScript((timeline) => {
+    let data;
+    Object.defineProperty(window, 'LOOPSFM_REPORT', {
+      get: () => data,
+      set: (full) => {
+        data = { title: full.title, timeline };
+      },
+    });
+  }, madeUpTimeline());
+  const loading = Date.now();
+  await longVideo.goto(pathToFileURL(path.resolve(reportPath)).href);
+  await longVideo.waitForFunction(() => window.loopsfmReport && window.loopsfmReport.ready, null, { timeout: 30000 });
+  const loadSeconds = (Date.now() - loading) / 1000;
+  const long = await timelineSection(longVideo);
+  console.log(`20,000 frames: "${long?.caption}", ready in ${loadSeconds.toFixed(2)} s`);
+  if (long?.title !== 'Keyframes along the video') fail(`with 20,000 frames, section #timeline is "${long?.title}"`);
+  if (long?.caption !== kMadeUpCaption) fail(`with 20,000 frames, caption "${long?.caption}", want "${kMadeUpCaption}"`);
+  // Generous: the strip itself takes well under a second; a slow machine loads the page slowly.
+  if (!(loadSeconds < 10)) fail(`with 20,000 frames, the report took ${loadSeconds.toFixed(1)} s to draw`);
+  const longRegion = await longVideo.evaluate(() => window.loopsfmReport.regions().timeline);
+  const longPng = await longVideo.screenshot();
+  const share = longRegion ? nonBackgroundShare(PNG.sync.read(longPng), longRegion) : 0;
+  console.log(`region timeline (20,000 frames): ${(100 * share).toFixed(1)} % of its pixels drawn`);
+  if (!(share >= kMinShare.timeline)) fail('with 20,000 frames, the keyframes chart looks empty');
+  const longScreenshot = screenshotPath.replace(/(\.png)?$/, '_timeline.png');
+  fs.writeFileSync(longScreenshot, longPng);
+  console.log(`screenshot: ${longScreenshot}`);
 } finally {
   await browser.close();
 }
