@@ -8,6 +8,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "loopsfm/util/errors.h"
+#include "loopsfm/util/logging.h"
 #include "loopsfm/video/point_tracker.h"
 
 namespace loopsfm {
@@ -238,6 +239,9 @@ class AdaptiveKeyframeSelector {
   // Keeps recent_[index] and starts tracking from it again, through the frames after it.
   void Emit(size_t index, KeyframeReason reason) {
     Seen& chosen = recent_[index];
+    spdlog::debug("keyframe {} ({}): parallax {:.2f} deg, {} of {} corners tracked at frame {}",
+                  chosen.frame.source_index, KeyframeReasonName(reason), parallax_deg_,
+                  tracked_.size(), num_corners_, recent_.back().frame.source_index);
     pending_.push_back(Keyframe{std::move(chosen.frame), chosen.sharpness, reason});
     ++summary_.keyframes;
     have_keyframe_ = true;

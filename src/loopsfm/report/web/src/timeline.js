@@ -1,7 +1,7 @@
 // Which frames of the source were kept as keyframes and why, along the video (data.timeline:
 // frames_read, kept [[index, reason], ...], blurred [...], localized [...]): one row per
-// kind of frame, drawn one pixel column at a time so that a video of tens of thousands of
-// frames costs no more than the width of the chart.
+// kind of frame, drawn one pixel column at a time, so that tens of thousands of frames cost
+// one pass over them and a few rectangles per row.
 import { Chart } from 'chart.js';
 
 import { chartBox } from './charts.js';
@@ -57,10 +57,11 @@ export function timelineCaption(frames) {
 }
 
 // Draws each row as one-pixel columns: a column shows a kind where any frame under it is of
-// that kind (frame i spans i - 0.5 to i + 0.5 on the axis); in the row of kept frames the
-// rarest reason under it wins, so that a lone tracking loss among hundreds of parallax
-// keyframes stays in sight. Kinds hidden from the legend are left out.
-function stripPlugin(frames, datasetOfKind) {
+// that kind (frame i spans i - 0.5 to i + 0.5 on the axis). Over the row of kept frames, the
+// frames of every reason but the commonest are drawn again at least 3 pixels wide, rarest on
+// top, so that a lone tracking loss among hundreds of parallax keyframes stays in sight.
+// Kinds hidden from the legend are left out; `kept` holds the kept frames of each kind.
+function stripPlugin(frames, kept, datasetOfKind) {
   return {
     id: 'frameStrip',
     beforeDatasetsDraw(chart) {
@@ -81,6 +82,9 @@ function stripPlugin(frames, datasetOfKind) {
         runs[row] = { from: px, colour };
       };
       ctx.save();
+      ctx.beginPath();
+      ctx.rect(area.left, area.top, area.right - area.left, area.bottom - area.top);
+      ctx.clip();
       const right = Math.ceil(area.right);
       for (let px = Math.floor(area.left); px < right; ++px) {
         const lo = Math.max(0, Math.floor(x.getValueForPixel(px) - 0.5) + 1);
@@ -88,12 +92,19 @@ function stripPlugin(frames, datasetOfKind) {
         const best = rows.map(() => -1);
         for (let i = lo; i < end; ++i) {
           const k = frames.kind[i];
-          const row = rowOf[k];
-          if (shown[k] && (best[row] < 0 || frames.counts[k] < frames.counts[best[row]])) best[row] = k;
+          if (shown[k]) best[rowOf[k]] = k;
         }
         best.forEach((k, row) => extend(row, px, k < 0 ? null : kKinds[k].colour));
       }
       rows.forEach((_, row) => extend(row, right, null));
+      const rare = kKinds.map((_, k) => k).filter((k) => k < kLocalised && shown[k])
+        .sort((a, b) => frames.counts[b] - frames.counts[a]).slice(1);
+      const width = Math.max(3, x.getPixelForValue(1) - x.getPixelForValue(0));
+      const top = y.getPixelForValue(0) - height / 2;
+      for (const k of rare) {
+        ctx.fillStyle = kKinds[k].colour;
+        for (const { x: i } of kept[k]) ctx.fillRect(x.getPixelForValue(i) - width / 2, top, width, height);
+      }
       ctx.restore();
     },
   };
@@ -128,7 +139,7 @@ export function timelineChart(parent, frames) {
   new Chart(canvas, {
     type: 'scatter',
     data: { datasets },
-    plugins: [stripPlugin(frames, datasetOfKind)],
+    plugins: [stripPlugin(frames, kept, datasetOfKind)],
     options: {
       interaction: { mode: 'nearest', axis: 'x', intersect: false },
       plugins: {
