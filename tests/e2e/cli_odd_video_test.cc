@@ -81,14 +81,17 @@ TEST(CliOddVideoTest, CameraTurningOnTheSpotGetsNoModelAndSaysWhy) {
     EXPECT_NE(run.output.find("no model could be started"), std::string::npos) << run;
     EXPECT_NE(run.output.find("stands still or only turns on the spot"), std::string::npos)
         << run;
-    // The frames were all there and matched: it is the baseline that is missing.
+    // The keyframes were there and matched: it is the baseline that is missing. Turning
+    // 120 degrees, adaptive selection keeps a frame each time a third of the view has moved
+    // on (the parallax stays near zero).
     const double frames = CaptureNumber(run.output, "\\((\\d+) frames, \\d+ verified pairs\\)");
     const double verified = CaptureNumber(run.output, "\\(\\d+ frames, (\\d+) verified pairs\\)");
-    EXPECT_EQ(frames, kFrames) << run;
-    EXPECT_GE(verified, kFrames) << run;
+    EXPECT_GE(frames, 5) << run;
+    EXPECT_LT(frames, kFrames) << run;
+    EXPECT_GE(verified, frames - 1) << run;
     EXPECT_FALSE(fs::exists(out / "sparse")) << "a model was written" << run;
     EXPECT_FALSE(fs::exists(out / "points.ply")) << run;
-    EXPECT_EQ(SnapshotDatabase(out / "database.db").frames.size(), static_cast<size_t>(kFrames));
+    EXPECT_EQ(static_cast<double>(SnapshotDatabase(out / "database.db").frames.size()), frames);
   }
 }
 

@@ -18,6 +18,9 @@
 //               in capture order; center and rotation (row-major, OpenCV camera axes: x
 //               right, y down, z forward) only for registered frames. The 3D view draws
 //               the frames of model 0 as frusta; the per-frame chart shows all.
+//   timeline    {frames_read, kept [[source_index, reason], ...], blurred [index, ...],
+//                localized [index, ...]}  every frame of the source along the video: kept
+//               (by KeyframeReasonName), localised between keyframes, blurred, skipped
 //   points      {xyz [x0 y0 z0 x1 ...], rgb [r0 g0 b0 ...]}  points of model 0, rgb 0..255
 //   matrices    [{title, png_base64}]                  similarity / match matrix images
 //   top_view    {x_label, y_label, paths [{label, xy [[x, y], ...]}]}  2D, one scale; a

@@ -188,11 +188,8 @@ class AdaptiveKeyframeSelector {
 
   // At the end: the last frames become a keyframe when they are half a keyframe step away.
   void Finish() {
+    if (!have_keyframe_ && !recent_.empty()) EmitBest(KeyframeReason::kFirst);
     if (recent_.empty()) return;
-    if (!have_keyframe_) {
-      EmitBest(KeyframeReason::kFirst);
-      return;
-    }
     const bool far_enough =
         deferred_ || tracked_.size() < static_cast<size_t>(options_.min_tracked_corners) ||
         parallax_deg_ >= 0.5 * options_.min_parallax_deg ||

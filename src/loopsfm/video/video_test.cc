@@ -205,6 +205,16 @@ int CountReason(const std::vector<Keyframe>& keyframes, KeyframeReason reason) {
                                         [&](const Keyframe& k) { return k.reason == reason; }));
 }
 
+// A clip shorter than the look-back: its first frame, and its last when the view moved on.
+TEST(AdaptiveKeyframes, ShortClipKeepsItsEndsWhenTheViewMoved) {
+  SlidingLayers still(3, 0.0, 0.0, 30.0), moving(3, 100.0, 200.0, 30.0);
+  EXPECT_EQ(AdaptiveKeyframes(still).size(), 1u);
+  const std::vector<Keyframe> keyframes = AdaptiveKeyframes(moving);
+  ASSERT_EQ(keyframes.size(), 2u);
+  EXPECT_EQ(keyframes[0].frame.source_index, 0);
+  EXPECT_EQ(keyframes[1].reason, KeyframeReason::kLast);
+}
+
 TEST(AdaptiveKeyframes, StandingStillKeepsOneFrame) {
   SlidingLayers source(60, 0.0, 0.0, 30.0);
   const std::vector<Keyframe> keyframes = AdaptiveKeyframes(source);
