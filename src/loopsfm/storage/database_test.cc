@@ -241,8 +241,13 @@ TEST_F(DatabaseTest, FrameOriginsWithoutReasonColumnAreUpgraded) {
     b = AddTwoFrames(db).second;
     db.WriteFrameOrigin(b, {7, 1.0, "first"});
   }
-  RawExec(path_, "CREATE TABLE old AS SELECT image_id, source_index, sharpness FROM loopsfm_frames;"
-                 "DROP TABLE loopsfm_frames; ALTER TABLE old RENAME TO loopsfm_frames;");
+  // The table as loopsfm wrote it before the column.
+  RawExec(path_,
+          "CREATE TABLE old (image_id INTEGER PRIMARY KEY NOT NULL, source_index INTEGER NOT "
+          "NULL, sharpness REAL NOT NULL, FOREIGN KEY(image_id) REFERENCES images(image_id) ON "
+          "DELETE CASCADE);"
+          "INSERT INTO old SELECT image_id, source_index, sharpness FROM loopsfm_frames;"
+          "DROP TABLE loopsfm_frames; ALTER TABLE old RENAME TO loopsfm_frames;");
   Database db = Database::Open(path_);
   const auto source = db.ReadFrameOrigin(b);
   ASSERT_TRUE(source.has_value());

@@ -120,7 +120,6 @@ class AdaptiveKeyframeSelector {
     const double fps = source.Info().fps > 0.0 ? source.Info().fps : 30.0;
     lookback_frames_ = std::max<size_t>(1, std::lround(options.lookback_seconds * fps));
     defer_frames_ = static_cast<size_t>(std::lround(options.max_defer_seconds * fps));
-    sharpness_window_ = std::max<size_t>(1, std::lround(fps));
   }
 
   std::optional<Keyframe> Next() {
@@ -153,10 +152,10 @@ class AdaptiveKeyframeSelector {
     seen.sharpness = FrameSharpness(frame.image);
     seen.grey = GreyForTracking(frame.image, options_.analysis_size, &scale_);
     seen.frame = std::move(frame);
-    recent_sharpness_.push_back(seen.sharpness);
-    if (recent_sharpness_.size() > sharpness_window_) recent_sharpness_.pop_front();
-    const double sharpest = *std::max_element(recent_sharpness_.begin(), recent_sharpness_.end());
-    seen.blurred = seen.sharpness < options_.blur_fraction * sharpest;
+    // Blur is judged within one view: against the frames tracked since the last keyframe
+    // (a new view may hold less texture without being blurred).
+    view_sharpest_ = std::max(view_sharpest_, seen.sharpness);
+    seen.blurred = seen.sharpness < options_.blur_fraction * view_sharpest_;
     if (seen.blurred) summary_.blurred.push_back(seen.frame.source_index);
 
     if (!have_keyframe_) {
@@ -178,6 +177,12 @@ class AdaptiveKeyframeSelector {
     if (recent_.size() > lookback_frames_) recent_.pop_front();
     const std::optional<KeyframeReason> due = Due();
     if (!due) return;
+    if (*due == KeyframeReason::kTrackingLost && recent_.size() >= 2 &&
+        !recent_[recent_.size() - 2].blurred) {
+      // The view broke between the last two frames (a whip pan, a cut): the frame before the
+      // break is kept too, so both sides of it are in the map.
+      Emit(recent_.size() - 2, KeyframeReason::kTrackingLost);
+    }
     if (BestCandidate().blurred && defer_frames_ > 0) {
       deferred_ = due;
       deferred_for_ = 0;
@@ -217,13 +222,15 @@ class AdaptiveKeyframeSelector {
   }
 
   // The sharpest frame of the look-back, preferring the latest of those within 10 % of it
-  // (the most parallax), or for the first keyframe the earliest (the video starts there).
-  size_t BestIndex(bool earliest = false) const {
+  // (the most parallax); for the first keyframe, the earliest that is not blurred (the video
+  // starts there).
+  size_t BestIndex(bool first = false) const {
     double sharpest = 0.0;
     for (const Seen& s : recent_) sharpest = std::max(sharpest, s.sharpness);
+    const double good_enough = first ? options_.blur_fraction * sharpest : 0.9 * sharpest;
     for (size_t k = 0; k < recent_.size(); ++k) {
-      const size_t i = earliest ? k : recent_.size() - 1 - k;
-      if (recent_[i].sharpness >= 0.9 * sharpest) return i;
+      const size_t i = first ? k : recent_.size() - 1 - k;
+      if (recent_[i].sharpness >= good_enough) return i;
     }
     return recent_.size() - 1;
   }
@@ -244,7 +251,11 @@ class AdaptiveKeyframeSelector {
     have_keyframe_ = true;
     deferred_.reset();
     StartTracking(chosen.grey);
-    for (size_t j = index + 1; j < recent_.size(); ++j) Track(recent_[j].grey);
+    view_sharpest_ = chosen.sharpness;
+    for (size_t j = index + 1; j < recent_.size(); ++j) {
+      Track(recent_[j].grey);
+      view_sharpest_ = std::max(view_sharpest_, recent_[j].sharpness);
+    }
     recent_.erase(recent_.begin(), recent_.begin() + static_cast<std::ptrdiff_t>(index) + 1);
   }
 
@@ -331,13 +342,14 @@ class AdaptiveKeyframeSelector {
   AdaptiveKeyframeOptions options_;
   KeyframeSummary& summary_;
   PointTrackerOptions tracker_;
-  size_t lookback_frames_ = 1, defer_frames_ = 0, sharpness_window_ = 1;
+  size_t lookback_frames_ = 1, defer_frames_ = 0;
   bool ended_ = false;
   bool have_keyframe_ = false;
   std::deque<Keyframe> pending_;
   // Frames since the last keyframe (at most the look-back, more while deferring).
   std::deque<Seen> recent_;
-  std::deque<double> recent_sharpness_;
+  // The sharpest frame since the last keyframe (the keyframe included).
+  double view_sharpest_ = 0.0;
   std::optional<KeyframeReason> deferred_;
   size_t deferred_for_ = 0;
   // Tracking state: the keyframe's corners, which of them are still tracked and where.

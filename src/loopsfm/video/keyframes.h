@@ -16,9 +16,11 @@
 //                 tracked (the view has moved on: a turn, forward motion);
 //               - or tracking breaks (fewer than min_tracked_corners left).
 //             The keyframe is then the sharpest frame of the last lookback_seconds; when all
-//             of them are blurred (sharpness below blur_fraction of the sharpest frame of the
-//             last second), the next sharp frame within max_defer_seconds is taken instead,
-//             else the sharpest seen. Angles and fractions do not depend on the resolution;
+//             of them are blurred (sharpness below blur_fraction of the sharpest frame since
+//             the last keyframe, the same view), the next sharp frame within
+//             max_defer_seconds is taken instead, else the sharpest seen. When tracking
+//             breaks from one frame to the next (a whip pan, a cut), the frame before the
+//             break is kept as well, so both sides of it are in the map. Angles and fractions do not depend on the resolution;
 //             nothing is counted in frames, so the choice does not depend on the frame rate.
 
 #include <cstdint>
@@ -51,7 +53,7 @@ struct AdaptiveKeyframeOptions {
   // A keyframe once the median parallax since the last one reaches this many degrees.
   double min_parallax_deg = 4.0;
   // ... or once fewer than this fraction of the last keyframe's corners are still tracked.
-  double min_tracked_fraction = 0.7;
+  double min_tracked_fraction = 0.8;
   // ... or once fewer than this many are (tracking broke).
   int min_tracked_corners = 30;
   // Corners detected in each keyframe.
@@ -59,8 +61,8 @@ struct AdaptiveKeyframeOptions {
   // Longer side, in pixels, of the grey copies that are tracked (frames smaller than this are
   // tracked as they are).
   int analysis_size = 480;
-  // A frame is blurred when its sharpness is below this fraction of the sharpest frame of
-  // the last second.
+  // A frame is blurred when its sharpness is below this fraction of the sharpest frame
+  // since the last keyframe.
   double blur_fraction = 0.6;
   // Seconds of frames before a due keyframe among which the sharpest is kept.
   double lookback_seconds = 0.2;
