@@ -69,9 +69,11 @@ class CliSyntheticTest : public ::testing::Test {
       return;
     }
     const auto start = std::chrono::steady_clock::now();
+    // Every frame (--every 1): the tests below check each frame's name, registration and
+    // pose (adaptive keyframes have tests of their own, cli_keyframes_e2e_test).
     r.reconstruct = RunLoopsfm({"reconstruct", (r.scene / "video.mp4").string(), "--intrinsics",
                                 (r.scene / "intrinsics.txt").string(), "-o", r.out.string(),
-                                "--text"});
+                                "--text", "--every", "1"});
     r.reconstruct_seconds =
         std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     std::cout << "[ info     ] reconstruct took " << r.reconstruct_seconds << " s\n";
@@ -298,7 +300,7 @@ TEST_F(CliSyntheticTest, SequentialPairsLeaveTheLoopOpenVocabTreeClosesIt) {
   const fs::path db = tmp / "database.db";
   const CommandResult extract =
       RunLoopsfm({"-q", "extract", (run_->scene / "video.mp4").string(), "-d", db.string(),
-                  "--intrinsics", (run_->scene / "intrinsics.txt").string()});
+                  "--intrinsics", (run_->scene / "intrinsics.txt").string(), "--every", "1"});
   ASSERT_EQ(extract.exit_code, 0) << extract;
   const CommandResult sequential =
       RunLoopsfm({"-q", "match", "-d", db.string(), "--pairs", "sequential", "--overlap", "3"});
