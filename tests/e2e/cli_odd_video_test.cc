@@ -300,9 +300,9 @@ TEST(CliOddVideoTest, VariableFrameRateVideoKeepsEveryFrameInOrder) {
 // with frames 64-65 did), and the model grew on from there. Now such a pose is estimated
 // again from the points shared with the frames next in time: 14 of 120 were, ATE 0.081 %.
 // Every frame (--every 1): with adaptive keyframes (100 of the 120 frames kept, or 114 with
-// --keyframe-overlap 0.9) the same walk ends at an ATE of 0.82 % (0.77 %): fewer frames
-// next in time leave the check above fewer shared points, and two twin registrations get
-// through. The guard is fragile on this scene; until it is not, the test keeps every frame.
+// --keyframe-overlap 0.9) the same walk ends in one model at an ATE of 0.82 % (0.77 %), ten
+// times this test's. The guard against poses on twin facades is fragile on this scene
+// (dropping 6 of 120 frames undoes it); until it is not, the test keeps every frame.
 TEST(CliOddVideoTest, RepeatedFacadesCloseNoFalseLoopAndKeepThePath) {
   constexpr int kFrames = 120;
   TempDir tmp;
