@@ -10,6 +10,9 @@ void FrameLocalizerOptions::Check() const {
                          min_num_inliers);
   LOOPSFM_REQUIRE_OPTION(min_inlier_ratio >= 0.0 && min_inlier_ratio <= 1.0,
                          "localisation: inlier ratio must be in [0, 1], got {}", min_inlier_ratio);
+  LOOPSFM_REQUIRE_OPTION(max_tracked_points >= min_num_inliers,
+                         "localisation: max_tracked_points ({}) below min_num_inliers ({})",
+                         max_tracked_points, min_num_inliers);
   LOOPSFM_REQUIRE_OPTION(max_tracking_size >= 64,
                          "localisation: tracking size must be at least 64 px, got {}",
                          max_tracking_size);
@@ -35,8 +38,13 @@ void FrameLocalizer::AddKeyframe(image_t image_id, const cv::Mat& image) {
     camera_id_ = keyframe.camera_id;
     positions_.clear();
     point_ids_.clear();
+    size_t num_observed = 0;
+    for (const Point2D& point : keyframe.points2D) num_observed += point.HasPoint3D();
+    const size_t stride =
+        (num_observed + options_.max_tracked_points - 1) / options_.max_tracked_points;
+    size_t k = 0;
     for (const Point2D& point : keyframe.points2D) {
-      if (!point.HasPoint3D()) continue;
+      if (!point.HasPoint3D() || k++ % stride != 0) continue;
       // Keypoints are in COLMAP's convention (pixel centres at +0.5), OpenCV's at 0.
       positions_.emplace_back(static_cast<float>(scale_ * point.xy.x() - 0.5),
                               static_cast<float>(scale_ * point.xy.y() - 0.5));

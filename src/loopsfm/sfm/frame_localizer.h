@@ -35,6 +35,9 @@ struct FrameLocalizerOptions {
   int min_num_inliers = 20;
   double min_inlier_ratio = 0.5;
   PointTrackerOptions tracker;
+  // Points tracked from a keyframe at most (its observations, evenly thinned): a pose needs
+  // far fewer than a keyframe observes, and tracking costs per point.
+  int max_tracked_points = 600;
   // Frames are tracked at most at this longer side, in pixels (keypoints scaled to it).
   int max_tracking_size = 2000;
   uint64_t seed = 0;
