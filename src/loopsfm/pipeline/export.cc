@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <map>
 #include <optional>
+#include <set>
 #include <unordered_map>
 
 #include <opencv2/imgcodecs.hpp>
@@ -227,8 +228,13 @@ ExportReport Export(std::vector<Reconstruction>* models, const std::vector<std::
   // trajectory and transforms.json show (and the COLMAP model, when asked).
   std::optional<Reconstruction> model0_all;
   std::vector<std::string> frames = kept_frames;
+  // A model written with --localized-in-model holds them already (`loopsfm export` again).
+  std::set<std::string> in_model0;
+  for (const auto& [id, image] : (*models)[0].Images()) in_model0.insert(image.name);
   for (const LocalizedFrame& frame : localized) {
     if (frame.pose.model != 0) continue;
+    frames.push_back(frame.name);
+    if (in_model0.count(frame.name)) continue;
     if (!model0_all) model0_all = (*models)[0];
     Image image;
     image.image_id = static_cast<image_t>(MaxImageId(*model0_all) + 1);
@@ -237,7 +243,6 @@ ExportReport Export(std::vector<Reconstruction>* models, const std::vector<std::
     image.cam_from_world = frame.pose.cam_from_world;
     model0_all->AddImage(std::move(image));
     model0_all->RegisterImage(static_cast<image_t>(MaxImageId(*model0_all)));
-    frames.push_back(frame.name);
   }
   const Reconstruction& model0 = (*models)[0];
   const Reconstruction& path0 = model0_all ? *model0_all : model0;

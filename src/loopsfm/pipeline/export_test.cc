@@ -4,6 +4,7 @@
 
 #include <fstream>
 
+#include "loopsfm/scene/dataset_files.h"
 #include "loopsfm/storage/colmap_model.h"
 #include "loopsfm/storage/model_io_test_scene.h"
 #include "loopsfm/util/errors.h"
@@ -55,6 +56,37 @@ TEST(Export, NewModelsReplaceTheOldFoldersWhole) {
   EXPECT_TRUE(fs::exists(out / "transforms.json"));
   ASSERT_EQ(report.models.size(), 1u);
   EXPECT_EQ(report.models[0].num_registered, models[0].NumRegImages());
+}
+
+// Frames localised between keyframes (--all-frames): a pose each in the trajectory and
+// transforms.json, in the COLMAP model only when asked, and never twice when a model that
+// holds them is exported again with OUT/localized.txt.
+TEST(Export, LocalizedFramesJoinThePathAndTheModelOnlyWhenAsked) {
+  const fs::path out = FreshDir("localized");
+  std::vector<Reconstruction> models = {model_io_test::MakeScene()};
+  const Image& first = models[0].GetImage(models[0].RegImageIds().front());
+  LocalizedFrame between;
+  between.name = "between.png";
+  between.pose.camera_id = first.camera_id;
+  between.pose.cam_from_world = first.cam_from_world;
+  const size_t keyframes = models[0].NumRegImages();
+
+  Export(&models, {}, "", out, ModelFormats(), {between});
+  EXPECT_EQ(ReadTrajectoryFile(out / "trajectory.txt").size(), keyframes + 1);
+  EXPECT_EQ(ReadColmapModel(out / "sparse" / "0").NumRegImages(), keyframes);
+  std::ifstream transforms(out / "transforms.json");
+  const std::string text((std::istreambuf_iterator<char>(transforms)), {});
+  EXPECT_NE(text.find("between.png"), std::string::npos);
+
+  ExportOptions in_model = ModelFormats();
+  in_model.localized_in_model = true;
+  Export(&models, {}, "", out, in_model, {between});
+  const Reconstruction written = ReadColmapModel(out / "sparse" / "0");
+  ASSERT_EQ(written.NumRegImages(), keyframes + 1);
+  WriteTrajectoryFile(out / "localized.txt", {{"between.png", first.cam_from_world.Inverse()}});
+  ExportRun(out, std::nullopt, in_model);
+  EXPECT_EQ(ReadColmapModel(out / "sparse" / "0").NumRegImages(), keyframes + 1);
+  EXPECT_EQ(ReadTrajectoryFile(out / "trajectory.txt").size(), keyframes + 1);
 }
 
 TEST(Export, FormatListsAreParsedAndCheckedByName) {
