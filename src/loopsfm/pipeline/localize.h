@@ -30,7 +30,9 @@ struct LocalizeReport {
 };
 
 // Reads `input` once, in order; frames stored in `database` are keyframes, the others are
-// localised against `models`. Returns the localised frames in source order.
+// localised against `models`, tracked forwards from the keyframe before them and, where that
+// fails, backwards from the keyframe after them. Returns the localised frames in source
+// order.
 std::vector<LocalizedFrame> LocalizeSkippedFrames(const std::filesystem::path& input,
                                                   const Database& database,
                                                   const std::vector<Reconstruction>& models,

@@ -9,6 +9,8 @@
 //     correspondences: P3P in LO-RANSAC, then a pose-only refinement of the reprojection
 //     error (estimators/absolute_pose.h) with the model's refined camera. Points that the
 //     pose calls outliers are tracked no further.
+// Frames may be colour (BGR) or grey. The driver (pipeline/localize.h) tries the frames that
+// this gave no pose again, tracking backwards from the next keyframe.
 // A keyframe that is not registered does not restart the tracking: the points go on through
 // it. No feature is extracted or matched, so a frame costs a fraction of a keyframe.
 
@@ -40,6 +42,9 @@ struct FrameLocalizerOptions {
   int max_tracked_points = 600;
   // Frames are tracked at most at this longer side, in pixels (keypoints scaled to it).
   int max_tracking_size = 2000;
+  // The frames between two keyframes are kept (grey) up to this many bytes, for a second try
+  // backwards from the next keyframe at the frames tracking forwards could not localise.
+  size_t max_buffered_bytes = size_t(256) << 20;
   uint64_t seed = 0;
   void Check() const;
 };
