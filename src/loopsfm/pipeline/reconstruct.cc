@@ -76,6 +76,16 @@ void WriteRegistrationRounds(const fs::path& path, const std::vector<Registratio
 
 namespace {
 
+// The source index of the frame midway between kept frames a and b, when one lies between.
+std::optional<int> GapMiddle(const std::unordered_map<image_t, FrameOrigin>& origins, image_t a,
+                             image_t b) {
+  const auto from = origins.find(a), to = origins.find(b);
+  if (from == origins.end() || to == origins.end()) return std::nullopt;
+  const int64_t first = from->second.source_index, last = to->second.source_index;
+  if (last - first < 2) return std::nullopt;
+  return static_cast<int>((first + last) / 2);
+}
+
 // Consecutive kept frames (capture order) without a verified pair between them: the source
 // index of each gap's middle frame; gaps with no frame between them are counted in
 // `unfillable`.
@@ -91,16 +101,40 @@ std::vector<int> UnverifiedGapMiddles(const Database& database, int* unfillable)
   for (size_t i = 1; i < frames.size(); ++i) {
     const image_t a = frames[i - 1].image_id, b = frames[i].image_id;
     if (verified.count(std::minmax(a, b))) continue;
-    const auto from = origins.find(a), to = origins.find(b);
-    if (from == origins.end() || to == origins.end()) continue;
-    const int64_t first = from->second.source_index, last = to->second.source_index;
-    if (last - first >= 2) {
-      middles.push_back(static_cast<int>((first + last) / 2));
+    if (const std::optional<int> middle = GapMiddle(origins, a, b)) {
+      middles.push_back(*middle);
     } else {
       ++*unfillable;
     }
   }
   return middles;
+}
+
+// Kept frames that no model registered: the middles of the gaps on both sides of each (in
+// source order, once each); `unregistered` counts them.
+std::vector<int> MiddlesAroundUnregistered(const Database& database,
+                                           const std::vector<Reconstruction>& models,
+                                           int* unregistered) {
+  auto registered = [&](image_t id) {
+    return std::any_of(models.begin(), models.end(), [&](const Reconstruction& model) {
+      return model.ExistsImage(id) && model.IsRegistered(id);
+    });
+  };
+  const auto origins = database.ReadFrameOrigins();
+  const std::vector<Frame> frames = FramesInCaptureOrder(database);
+  std::set<int> middles;
+  *unregistered = 0;
+  for (size_t i = 0; i < frames.size(); ++i) {
+    if (registered(frames[i].image_id)) continue;
+    ++*unregistered;
+    if (i > 0) {
+      if (auto m = GapMiddle(origins, frames[i - 1].image_id, frames[i].image_id)) middles.insert(*m);
+    }
+    if (i + 1 < frames.size()) {
+      if (auto m = GapMiddle(origins, frames[i].image_id, frames[i + 1].image_id)) middles.insert(*m);
+    }
+  }
+  return {middles.begin(), middles.end()};
 }
 
 FrameTimeline ReadFrameTimeline(const Database& database, int frames_read) {
@@ -201,41 +235,60 @@ ReconstructReport Reconstruct(const fs::path& input, const fs::path& output_dir,
     report.stage_times.push_back({"fill-in", stage.ElapsedSeconds()});
   }
 
-  stage.Restart();
-  MapperInput mapper_input = LoadMapperInput(database, &report.tracks);
-  report.stage_times.push_back({"tracks", stage.ElapsedSeconds()});
-  spdlog::info("tracks: {} (mean length {:.2f}; {} conflicting split, {} matches left out)",
-               report.tracks.num_tracks, report.tracks.mean_track_length,
-               report.tracks.num_conflicting_tracks, report.tracks.num_dropped_matches);
-
-  if (options.self_calibrate) {
-    stage.Restart();
-    SelfCalibrationOptions self_calibration = options.self_calibration;
-    self_calibration.verification = options.match.verification;
-    report.self_calibration = SelfCalibrate(self_calibration, &mapper_input);
-    report.stage_times.push_back({"self-calibration", stage.ElapsedSeconds()});
-  }
-
-  stage.Restart();
+  // Mapping, and once more when adaptive keyframes left kept frames unregistered (a turn
+  // too fast for the frames kept): in-between frames around them are added first.
+  MapperInput mapper_input;
   std::vector<Reconstruction> models;
-  {
-    nlohmann::json fingerprint;  // digests the whole mapper input: only with checkpoints
-    std::optional<MapperCheckpoint> resume;
-    MapperCheckpointing checkpointing;
-    if (options.checkpoint_interval_seconds > 0.0) {
-      fingerprint = MapperCheckpointFingerprint(mapper_input, options.mapper);
-      resume = ReadMapperCheckpoint(checkpoint_path, fingerprint);
-      if (resume) checkpointing.resume = &*resume;
-      checkpointing.interval_seconds = options.checkpoint_interval_seconds;
-      checkpointing.save = [&](const MapperCheckpoint& checkpoint) {
-        WriteMapperCheckpoint(checkpoint_path, checkpoint, fingerprint);
-      };
+  const bool adaptive = options.fill_in_rounds > 0 && database.ReadMeta("keyframes").has_value();
+  for (int pass = 0;; ++pass) {
+    stage.Restart();
+    mapper_input = LoadMapperInput(database, &report.tracks);
+    report.stage_times.push_back({pass == 0 ? "tracks" : "tracks-again", stage.ElapsedSeconds()});
+    spdlog::info("tracks: {} (mean length {:.2f}; {} conflicting split, {} matches left out)",
+                 report.tracks.num_tracks, report.tracks.mean_track_length,
+                 report.tracks.num_conflicting_tracks, report.tracks.num_dropped_matches);
+
+    if (options.self_calibrate) {
+      stage.Restart();
+      SelfCalibrationOptions self_calibration = options.self_calibration;
+      self_calibration.verification = options.match.verification;
+      report.self_calibration = SelfCalibrate(self_calibration, &mapper_input);
+      report.stage_times.push_back(
+          {pass == 0 ? "self-calibration" : "self-calibration-again", stage.ElapsedSeconds()});
     }
-    Progress progress("map", mapper_input.frames.size(), options.show_progress);
-    models = RunIncrementalMapper(mapper_input, options.mapper, &report.mapper,
-                                  [&](size_t, size_t) { progress.Advance(); }, checkpointing);
+
+    stage.Restart();
+    {
+      nlohmann::json fingerprint;  // digests the whole mapper input: only with checkpoints
+      std::optional<MapperCheckpoint> resume;
+      MapperCheckpointing checkpointing;
+      if (options.checkpoint_interval_seconds > 0.0) {
+        fingerprint = MapperCheckpointFingerprint(mapper_input, options.mapper);
+        resume = ReadMapperCheckpoint(checkpoint_path, fingerprint);
+        if (resume) checkpointing.resume = &*resume;
+        checkpointing.interval_seconds = options.checkpoint_interval_seconds;
+        checkpointing.save = [&](const MapperCheckpoint& checkpoint) {
+          WriteMapperCheckpoint(checkpoint_path, checkpoint, fingerprint);
+        };
+      }
+      Progress progress("map", mapper_input.frames.size(), options.show_progress);
+      models = RunIncrementalMapper(mapper_input, options.mapper, &report.mapper,
+                                    [&](size_t, size_t) { progress.Advance(); }, checkpointing);
+    }
+    report.stage_times.push_back({pass == 0 ? "map" : "map-again", stage.ElapsedSeconds()});
+    if (pass > 0 || !adaptive) break;
+    stage.Restart();
+    int unregistered = 0;
+    const std::vector<int> middles = MiddlesAroundUnregistered(database, models, &unregistered);
+    if (middles.empty()) break;
+    spdlog::info("fill-in: {} kept frame{} not registered; {} in-between frames around them, "
+                 "then mapping again",
+                 unregistered, unregistered == 1 ? " was" : "s were", middles.size());
+    report.fill_in_frames +=
+        ExtractFillInFrames(input, database, options.extract, middles).frames_extracted;
+    MatchPairs(database, options.match);
+    report.stage_times.push_back({"fill-in-again", stage.ElapsedSeconds()});
   }
-  report.stage_times.push_back({"map", stage.ElapsedSeconds()});
   if (models.empty()) {
     spdlog::warn("no model could be started: no frame pair had enough matches with a wide enough "
                  "baseline ({} frames, {} verified pairs). 3D needs the camera to move through "

@@ -26,7 +26,9 @@ struct ReconstructOptions {
   MatchOptions match;
   // Adaptive keyframes: rounds of in-between frames added where two consecutive kept frames
   // have no verified pair (a fast turn, a blurred stretch): the middle frame of the gap is
-  // extracted and matched, and again in the halves that still break; 0: none.
+  // extracted and matched, and again in the halves that still break; 0: none. After
+  // mapping, kept frames that no model registered get the middle frames on both sides, and
+  // mapping runs once more (only then).
   int fill_in_rounds = 3;
   // After mapping, give every frame between keyframes a pose (pipeline/localize.h).
   bool all_frames = false;

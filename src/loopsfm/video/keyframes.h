@@ -53,7 +53,7 @@ struct AdaptiveKeyframeOptions {
   // A keyframe once the median parallax since the last one reaches this many degrees.
   double min_parallax_deg = 4.0;
   // ... or once fewer than this fraction of the last keyframe's corners are still tracked.
-  double min_tracked_fraction = 0.8;
+  double min_tracked_fraction = 0.85;
   // ... or once fewer than this many are (tracking broke).
   int min_tracked_corners = 30;
   // Corners detected in each keyframe.
