@@ -56,7 +56,7 @@ namespace loopsfm {
 struct FrameOrigin {
   // Index of the frame in the source video (or position in the image folder).
   int64_t source_index = -1;
-  // Sharpness score used by keyframe selection (variance of the Laplacian).
+  // Sharpness score used by keyframe selection (FrameSharpness in video/keyframes.h).
   double sharpness = 0.0;
   // Why the frame was kept (KeyframeReasonName in video/keyframes.h); empty when unknown.
   std::string reason;

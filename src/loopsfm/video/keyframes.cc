@@ -108,7 +108,10 @@ double FrameSharpness(const cv::Mat& image) {
   // 3x3 Sobel of 8-bit pixels fits 16 bits exactly: half the memory of floats (an 8K frame).
   cv::Sobel(grey, dx, CV_16S, 1, 0);
   cv::Sobel(grey, dy, CV_16S, 0, 1);
-  return (cv::sum(cv::abs(dx))[0] + cv::sum(cv::abs(dy))[0]) / static_cast<double>(grey.total());
+  // Motion blur smears along one direction and leaves the other: the weaker direction tells
+  // it (a frame blurred sideways keeps its vertical gradients, half of the sum).
+  const double x = cv::sum(cv::abs(dx))[0], y = cv::sum(cv::abs(dy))[0];
+  return 2.0 * std::min(x, y) / static_cast<double>(grey.total());
 }
 
 // The adaptive rule of keyframes.h, one source frame at a time.

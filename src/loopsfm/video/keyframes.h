@@ -96,7 +96,8 @@ struct KeyframeOptions {
 // The mode used for a source of this kind (kAuto resolved).
 KeyframeMode ResolvedKeyframeMode(const KeyframeOptions& options, SourceKind kind);
 
-// Mean gradient magnitude (|d/dx| + |d/dy| of the grey image): larger is sharper.
+// Twice the smaller of the mean |d/dx| and mean |d/dy| of the grey image: larger is sharper;
+// a motion blur along either axis lowers it by what it takes from that axis.
 double FrameSharpness(const cv::Mat& image);
 
 struct Keyframe {
