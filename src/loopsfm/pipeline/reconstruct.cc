@@ -276,7 +276,8 @@ ReconstructReport Reconstruct(const fs::path& input, const fs::path& output_dir,
                                     [&](size_t, size_t) { progress.Advance(); }, checkpointing);
     }
     report.stage_times.push_back({pass == 0 ? "map" : "map-again", stage.ElapsedSeconds()});
-    if (pass > 0 || !adaptive) break;
+    // Once per database: a rerun (which maps the fill-ins from the start) adds no more.
+    if (pass > 0 || !adaptive || database.ReadMeta("fill_in_after_mapping")) break;
     stage.Restart();
     int unregistered = 0;
     const std::vector<int> middles = MiddlesAroundUnregistered(database, models, &unregistered);
@@ -287,6 +288,7 @@ ReconstructReport Reconstruct(const fs::path& input, const fs::path& output_dir,
     report.fill_in_frames +=
         ExtractFillInFrames(input, database, options.extract, middles).frames_extracted;
     MatchPairs(database, options.match);
+    database.WriteMeta("fill_in_after_mapping", std::to_string(middles.size()));
     report.stage_times.push_back({"fill-in-again", stage.ElapsedSeconds()});
   }
   if (models.empty()) {
