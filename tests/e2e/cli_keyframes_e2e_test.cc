@@ -112,7 +112,9 @@ TEST_F(CliKeyframesTest, EveryFrameGetsAPoseNearTheKeyframesAccuracy) {
   }
   EXPECT_EQ(paths, all.size());
   size_t images = 0;
-  for (const auto& entry : fs::directory_iterator(Out() / "images")) images += entry.is_regular_file();
+  for (const auto& entry : fs::directory_iterator(Out() / "images")) {
+    images += entry.is_regular_file();
+  }
   EXPECT_EQ(images, all.size());
 }
 

@@ -184,15 +184,19 @@ void AddReconstructCommand(CLI::App& app) {
                 "Evaluation: map without the pairs between frames 50 or more apart, then add "
                 "them and close the loops at the end (drift grows unchecked until then; compare "
                 "with --loop-closing none)");
-  cmd->add_option("--fill-in-rounds", flags->fill_in_rounds,
-                  "Adaptive keyframes: rounds of in-between frames added where two consecutive "
-                  "kept frames do not verify (the middle frame of the gap, then of its halves); "
-                  "0: none")
-      ->check(CLI::NonNegativeNumber)
-      ->capture_default_str();
+  CLI::Option* fill_in_rounds =
+      cmd->add_option("--fill-in-rounds", flags->fill_in_rounds,
+                      "Adaptive keyframes: rounds of in-between frames added where two "
+                      "consecutive kept frames do not verify (the middle frame of the gap, then "
+                      "of its halves); kept frames left unregistered after mapping get the "
+                      "frames midway to their neighbours and mapping runs once more. 0: none "
+                      "of this")
+          ->check(CLI::NonNegativeNumber)
+          ->capture_default_str();
   cmd->add_flag("--all-frames", flags->all_frames,
                 "A pose for every frame: after mapping, the frames between keyframes are "
-                "tracked from the keyframe before them and localised against the map; they go "
+                "tracked from the keyframe before them (or after, where that fails) and "
+                "localised against the map; they go "
                 "to trajectory.txt, transforms.json and images/ (and OUT/localized.txt), not to "
                 "the COLMAP model unless --localized-in-model");
   cmd->add_flag("--localized-in-model", flags->localized_in_model,
@@ -218,9 +222,13 @@ void AddReconstructCommand(CLI::App& app) {
                 "the first rejected; writes OUT/registrations.csv (both rounds' inliers, and "
                 "where a second plausible pose was found, how far it is) and plots the two "
                 "rounds' inlier ratios in report.html. Does not change the mapping");
-  cmd->callback([flags] {
+  cmd->callback([flags, fill_in_rounds] {
     ReconstructOptions options;
     options.extract = flags->extract.Resolve();
+    if (fill_in_rounds->count() > 0 && options.extract.keyframes.mode == KeyframeMode::kWindows) {
+      throw InvalidArgument("--fill-in-rounds fills gaps between adaptive keyframes: it cannot be "
+                            "combined with fixed windows (--every, --keyframes windows)");
+    }
     options.match = flags->match.Resolve();
     options.mapper.num_threads = Common().threads;
     if (!flags->refine.empty()) {

@@ -28,14 +28,17 @@ void AddExtractFlags(CLI::App* cmd, ExtractFlags* flags) {
                      ->capture_default_str();
   cmd->add_flag("--first-of-window", flags->first_of_window,
                 "With --every, keep the first frame of each window instead of the sharpest");
-  cmd->add_option("--keyframe-parallax", flags->options.keyframes.adaptive.min_parallax_deg,
-                  "Adaptive keyframes: a new keyframe once the median parallax (the part of the "
-                  "motion of tracked corners that no rotation explains) reaches this many degrees")
-      ->capture_default_str();
-  cmd->add_option("--keyframe-overlap", flags->options.keyframes.adaptive.min_tracked_fraction,
-                  "Adaptive keyframes: ... or once fewer than this fraction of the last "
-                  "keyframe's corners are still tracked")
-      ->capture_default_str();
+  flags->adaptive_flags = {
+      cmd->add_option("--keyframe-parallax", flags->options.keyframes.adaptive.min_parallax_deg,
+                      "Adaptive keyframes: a new keyframe once the median parallax (the part of "
+                      "the motion of tracked corners that no rotation explains) reaches this "
+                      "many degrees (implies --keyframes adaptive)")
+          ->capture_default_str(),
+      cmd->add_option("--keyframe-overlap",
+                      flags->options.keyframes.adaptive.min_tracked_fraction,
+                      "Adaptive keyframes: ... or once fewer than this fraction of the last "
+                      "keyframe's corners are still tracked (implies --keyframes adaptive)")
+          ->capture_default_str()};
   cmd->add_option("--upscale", flags->options.sift.upscale,
                   "Upscale frames by this factor before SIFT (low-resolution video)")
       ->capture_default_str();
@@ -59,6 +62,15 @@ ExtractOptions ExtractFlags::Resolve() const {
                                         resolved.keyframes.every));
     }
     resolved.keyframes.mode = KeyframeMode::kWindows;
+  }
+  for (const CLI::Option* flag : adaptive_flags) {
+    if (flag->count() == 0) continue;
+    if (resolved.keyframes.mode == KeyframeMode::kWindows) {
+      throw InvalidArgument(fmt::format("{} tunes adaptive keyframes: it cannot be combined with "
+                                        "fixed windows (--every, --keyframes windows)",
+                                        flag->get_name()));
+    }
+    resolved.keyframes.mode = KeyframeMode::kAdaptive;
   }
   if (first_of_window && resolved.keyframes.mode != KeyframeMode::kWindows) {
     throw InvalidArgument("--first-of-window applies to fixed windows: add --every N (or "

@@ -3,6 +3,7 @@
 
 #include <optional>
 #include <string>
+#include <vector>
 
 #include <CLI/CLI.hpp>
 
@@ -18,6 +19,8 @@ struct ExtractFlags {
   // Empty: auto (adaptive for a video, every image of a folder; windows when --every is given).
   std::string keyframes;
   CLI::Option* every = nullptr;
+  // --keyframe-parallax and --keyframe-overlap: given, they ask for adaptive keyframes.
+  std::vector<CLI::Option*> adaptive_flags;
   bool first_of_window = false;
   bool no_root_sift = false;
   // Options with the flags applied (reads the intrinsics file).

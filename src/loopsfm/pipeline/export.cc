@@ -216,8 +216,8 @@ std::set<ExportFormat> ParseExportFormats(const std::string& list) {
 
 void ExportOptions::Check() const { undistort.Check(); }
 
-ExportReport Export(std::vector<Reconstruction>* models, const std::vector<std::string>& kept_frames,
-                    const fs::path& frames_source, const fs::path& output_dir,
+ExportReport Export(std::vector<Reconstruction>* models,
+                    const std::vector<std::string>& kept_frames, const fs::path& frames_source, const fs::path& output_dir,
                     const ExportOptions& options, const std::vector<LocalizedFrame>& localized) {
   options.Check();
   Timer timer;

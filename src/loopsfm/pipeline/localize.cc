@@ -80,9 +80,10 @@ std::vector<LocalizedFrame> LocalizeSkippedFrames(const std::filesystem::path& i
     }
   }
   progress.Finish();
-  std::sort(localized.begin(), localized.end(), [](const LocalizedFrame& a, const LocalizedFrame& b) {
-    return a.source_index < b.source_index;
-  });
+  std::sort(localized.begin(), localized.end(),
+            [](const LocalizedFrame& a, const LocalizedFrame& b) {
+              return a.source_index < b.source_index;
+            });
   report->seconds = timer.ElapsedSeconds();
   return localized;
 }

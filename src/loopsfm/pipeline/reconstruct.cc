@@ -127,11 +127,12 @@ std::vector<int> MiddlesAroundUnregistered(const Database& database,
   for (size_t i = 0; i < frames.size(); ++i) {
     if (registered(frames[i].image_id)) continue;
     ++*unregistered;
-    if (i > 0) {
-      if (auto m = GapMiddle(origins, frames[i - 1].image_id, frames[i].image_id)) middles.insert(*m);
-    }
-    if (i + 1 < frames.size()) {
-      if (auto m = GapMiddle(origins, frames[i].image_id, frames[i + 1].image_id)) middles.insert(*m);
+    for (size_t j : {i - 1, i + 1}) {  // the neighbours before and after (i - 1 wraps at 0)
+      if (j >= frames.size()) continue;
+      const auto [a, b] = std::minmax(i, j);
+      if (auto middle = GapMiddle(origins, frames[a].image_id, frames[b].image_id)) {
+        middles.insert(*middle);
+      }
     }
   }
   return {middles.begin(), middles.end()};
@@ -343,7 +344,9 @@ ReconstructReport Reconstruct(const fs::path& input, const fs::path& output_dir,
     fs::remove(output_dir / "registrations.csv");
   }
   report.timeline = ReadFrameTimeline(database, report.extract.frames_read);
-  for (const LocalizedFrame& frame : localized) report.timeline.localized.push_back(frame.source_index);
+  for (const LocalizedFrame& frame : localized) {
+    report.timeline.localized.push_back(frame.source_index);
+  }
   if (options.output.formats.count(ExportFormat::kReport)) {
     stage.Restart();
     WriteHtmlReport(output_dir / "report.html",

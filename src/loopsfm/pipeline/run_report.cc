@@ -140,7 +140,9 @@ nlohmann::json RunReportData(const ReconstructReport& report,
   const FrameTimeline& timeline = report.timeline;
   if (timeline.frames_read > 0) {
     nlohmann::json kept = nlohmann::json::array();
-    for (const auto& [index, reason] : timeline.kept) kept.push_back(nlohmann::json::array({index, reason}));
+    for (const auto& [index, reason] : timeline.kept) {
+      kept.push_back(nlohmann::json::array({index, reason}));
+    }
     data["timeline"] = {{"frames_read", timeline.frames_read},
                         {"kept", std::move(kept)},
                         {"blurred", timeline.blurred},

@@ -77,7 +77,9 @@ void FrameLocalizer::Track(const cv::Mat& grey) {
 
 std::optional<LocalizedPose> FrameLocalizer::Localize(const cv::Mat& image) {
   Track(Grey(image));
-  if (!model_ || static_cast<int>(positions_.size()) < options_.min_num_inliers) return std::nullopt;
+  if (!model_ || static_cast<int>(positions_.size()) < options_.min_num_inliers) {
+    return std::nullopt;
+  }
   const Reconstruction& model = models_[*model_];
   std::vector<Eigen::Vector2d> points2D;
   std::vector<Eigen::Vector3d> points3D;

@@ -264,7 +264,8 @@ std::optional<FrameOrigin> Database::ReadFrameOrigin(image_t image_id) const {
 }
 
 std::unordered_map<image_t, FrameOrigin> Database::ReadFrameOrigins() const {
-  sqlite3_stmt* stmt = Prepare("SELECT image_id, source_index, sharpness, reason FROM loopsfm_frames");
+  sqlite3_stmt* stmt =
+      Prepare("SELECT image_id, source_index, sharpness, reason FROM loopsfm_frames");
   StatementScope scope(stmt);
   std::unordered_map<image_t, FrameOrigin> origins;
   while (Step(stmt)) {

@@ -58,7 +58,8 @@ std::string_view KeyframeModeName(KeyframeMode mode) {
 }
 
 KeyframeMode ParseKeyframeMode(std::string_view name) {
-  for (const KeyframeMode mode : {KeyframeMode::kAuto, KeyframeMode::kWindows, KeyframeMode::kAdaptive}) {
+  for (const KeyframeMode mode :
+       {KeyframeMode::kAuto, KeyframeMode::kWindows, KeyframeMode::kAdaptive}) {
     if (KeyframeModeName(mode) == name) return mode;
   }
   throw InvalidArgument(fmt::format(
@@ -80,8 +81,8 @@ void AdaptiveKeyframeOptions::Check() const {
   LOOPSFM_REQUIRE_OPTION(min_tracked_corners >= 8 && max_corners > min_tracked_corners,
                          "keyframes: need 8 <= min_tracked_corners < max_corners, got {} and {}",
                          min_tracked_corners, max_corners);
-  LOOPSFM_REQUIRE_OPTION(analysis_size >= 64, "keyframes: analysis_size must be at least 64, got {}",
-                         analysis_size);
+  LOOPSFM_REQUIRE_OPTION(analysis_size >= 64,
+                         "keyframes: analysis_size must be at least 64, got {}", analysis_size);
   LOOPSFM_REQUIRE_OPTION(blur_fraction >= 0.0 && blur_fraction < 1.0,
                          "keyframes: blur_fraction must be in [0, 1), got {}", blur_fraction);
   LOOPSFM_REQUIRE_OPTION(lookback_seconds >= 0.0 && max_defer_seconds >= 0.0,

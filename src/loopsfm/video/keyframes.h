@@ -20,8 +20,9 @@
 //             the last keyframe, the same view), the next sharp frame within
 //             max_defer_seconds is taken instead, else the sharpest seen. When tracking
 //             breaks from one frame to the next (a whip pan, a cut), the frame before the
-//             break is kept as well, so both sides of it are in the map. Angles and fractions do not depend on the resolution;
-//             nothing is counted in frames, so the choice does not depend on the frame rate.
+//             break is kept as well, so both sides of it are in the map. Angles and
+//             fractions do not depend on the resolution; nothing is counted in frames, so
+//             the choice does not depend on the frame rate.
 
 #include <cstdint>
 #include <deque>

@@ -43,7 +43,8 @@ void TrackPoints(const cv::Mat& previous, const cv::Mat& next,
   const double max_fb2 = options.max_fb_error_px * options.max_fb_error_px;
   for (size_t i = 0; i < points.size(); ++i) {
     const cv::Point2f& p = (*tracked)[i];
-    const bool inside = p.x >= 0.f && p.y >= 0.f && p.x <= next.cols - 1.f && p.y <= next.rows - 1.f;
+    const bool inside =
+        p.x >= 0.f && p.y >= 0.f && p.x <= next.cols - 1.f && p.y <= next.rows - 1.f;
     const cv::Point2f d = back[i] - points[i];
     (*ok)[i] = forward_ok[i] && backward_ok[i] && inside && d.dot(d) <= max_fb2;
   }

@@ -152,7 +152,9 @@ class SlidingLayers : public FrameSource {
     const int i = next_++;
     cv::Mat frame(kHeight, kWidth, CV_8UC3);
     Slide(far_, far_px_ * i).rowRange(0, kHeight / 2).copyTo(frame.rowRange(0, kHeight / 2));
-    Slide(near_, near_px_ * i).rowRange(kHeight / 2, kHeight).copyTo(frame.rowRange(kHeight / 2, kHeight));
+    Slide(near_, near_px_ * i)
+        .rowRange(kHeight / 2, kHeight)
+        .copyTo(frame.rowRange(kHeight / 2, kHeight));
     if (i >= blurred_.first && i <= blurred_.second) {
       cv::blur(frame, frame, cv::Size(15, 1));
     }
