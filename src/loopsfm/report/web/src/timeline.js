@@ -12,7 +12,7 @@ const kKinds = [
   { name: 'parallax', colour: '#1f5fd6', row: 'kept' },
   { name: 'overlap', colour: '#2a9d4b', row: 'kept' },
   { name: 'tracking lost', colour: '#d6452b', row: 'kept' },
-  { name: 'fill-in', note: 'in-between frame added because two keyframes did not verify', colour: '#9b4dca', row: 'kept' },
+  { name: 'fill-in', note: 'in-between frame added where keyframes did not verify or register', colour: '#9b4dca', row: 'kept' },
   { name: 'first / last', colour: '#1d2330', row: 'kept' },
   { name: 'window', colour: '#e0a100', row: 'kept' },
   { name: 'reason not recorded', colour: '#8c8c8c', row: 'kept' },
