@@ -237,12 +237,13 @@ ExportReport Export(std::vector<Reconstruction>* models,
     if (in_model0.count(frame.name)) continue;
     if (!model0_all) model0_all = (*models)[0];
     Image image;
-    image.image_id = static_cast<image_t>(MaxImageId(*model0_all) + 1);
+    const image_t image_id = MaxImageId(*model0_all) + 1;
+    image.image_id = image_id;
     image.camera_id = frame.pose.camera_id;
     image.name = frame.name;
     image.cam_from_world = frame.pose.cam_from_world;
     model0_all->AddImage(std::move(image));
-    model0_all->RegisterImage(static_cast<image_t>(MaxImageId(*model0_all)));
+    model0_all->RegisterImage(image_id);
   }
   const Reconstruction& model0 = (*models)[0];
   const Reconstruction& path0 = model0_all ? *model0_all : model0;

@@ -163,9 +163,8 @@ FrameTimeline ReadFrameTimeline(const Database& database, int frames_read) {
 
 void FillInGaps(const fs::path& input, Database& database, const ReconstructOptions& options,
                 ReconstructReport* report) {
-  for (int round = 0; round < options.fill_in_rounds; ++round) {
-    const std::vector<int> middles = UnverifiedGapMiddles(database, &report->fill_in_unfilled);
-    if (middles.empty()) break;
+  std::vector<int> middles = UnverifiedGapMiddles(database, &report->fill_in_unfilled);
+  for (int round = 0; round < options.fill_in_rounds && !middles.empty(); ++round) {
     const ExtractReport extracted =
         ExtractFillInFrames(input, database, options.extract, middles);
     report->fill_in_frames += extracted.frames_extracted;
@@ -174,10 +173,10 @@ void FillInGaps(const fs::path& input, Database& database, const ReconstructOpti
                  "{} pairs matched",
                  round + 1, middles.size(), middles.size() == 1 ? "" : "s",
                  matched.num_pairs_matched);
+    middles = UnverifiedGapMiddles(database, &report->fill_in_unfilled);
   }
   // What is still broken after the last round.
-  const std::vector<int> left = UnverifiedGapMiddles(database, &report->fill_in_unfilled);
-  report->fill_in_unfilled += static_cast<int>(left.size());
+  report->fill_in_unfilled += static_cast<int>(middles.size());
   if (report->fill_in_frames > 0 || report->fill_in_unfilled > 0) {
     spdlog::info("fill-in: {} in-between frames added; {} gaps between kept frames still "
                  "without a verified pair",
