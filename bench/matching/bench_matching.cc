@@ -9,6 +9,8 @@
 // otherwise synthetic SIFT-like descriptors (half of image 2 are noisy copies of image 1).
 // After the runs, a summary prints ms per pair (median over repetitions when given), pairs per
 // second, the speed-up, and how well the two matchers' results agree.
+// Then a table of every matching kernel this CPU runs on the same pairs: ms per pair, speed-up
+// over the float kernel, and whether the matches are identical.
 
 #include <benchmark/benchmark.h>
 
@@ -218,7 +220,12 @@ int main(int argc, char** argv) {
     int requested;
     std::shared_ptr<PairData> data;
     size_t ours = 0, bf = 0, common = 0;
+    // Per kernel: whether its matches (cross check, the pipeline's defaults) are identical to
+    // the float kernel's, and how many there are.
+    std::map<std::string, bool> identical;
+    size_t kernel_matches = 0;
   };
+  const std::vector<DescriptorKernel> kernels = AvailableDescriptorKernels();
   std::vector<Row> rows;
   for (const int n : sizes) {
     std::shared_ptr<PairData> data = folder ? FromImages(folder, n) : nullptr;
@@ -236,7 +243,18 @@ int main(int argc, char** argv) {
     const std::vector<std::pair<int, int>> bf = BfMatches(*data);
     size_t common = 0;
     for (const auto& m : bf) common += ours.count(m);
-    rows.push_back({n, data, ours.size(), bf.size(), common});
+    Row row{n, data, ours.size(), bf.size(), common, {}, 0};
+    DescriptorMatchingOptions float_options;
+    float_options.kernel = DescriptorKernel::kFloat;
+    const FeatureMatches float_matches = MatchDescriptors(data->d1, data->d2, float_options);
+    row.kernel_matches = float_matches.size();
+    for (const DescriptorKernel kernel : kernels) {
+      DescriptorMatchingOptions options;
+      options.kernel = kernel;
+      row.identical[DescriptorKernelName(kernel)] =
+          MatchDescriptors(data->d1, data->d2, options) == float_matches;
+    }
+    rows.push_back(std::move(row));
 
     const std::string size = std::to_string(n);
     benchmark::RegisterBenchmark(("match/loopsfm/" + size).c_str(), [data](benchmark::State& state) {
@@ -250,13 +268,16 @@ int main(int argc, char** argv) {
       for (auto _ : state) benchmark::DoNotOptimize(MatchDescriptors(data->d1, data->d2, options));
       state.counters["pairs_per_s"] = benchmark::Counter(state.iterations(), benchmark::Counter::kIsRate);
     })->Unit(benchmark::kMillisecond)->UseRealTime();
-    benchmark::RegisterBenchmark(("match/loopsfm_float_kernel/" + size).c_str(),
-                                 [data](benchmark::State& state) {
-      DescriptorMatchingOptions options;  // cross check as the default, Eigen's float GEMM
-      options.use_int8_kernel = false;
-      for (auto _ : state) benchmark::DoNotOptimize(MatchDescriptors(data->d1, data->d2, options));
-      state.counters["pairs_per_s"] = benchmark::Counter(state.iterations(), benchmark::Counter::kIsRate);
-    })->Unit(benchmark::kMillisecond)->UseRealTime();
+    // Every kernel this CPU runs, cross check as the pipeline's defaults.
+    for (const DescriptorKernel kernel : kernels) {
+      const std::string name = "match/kernel/" + DescriptorKernelName(kernel) + "/" + size;
+      benchmark::RegisterBenchmark(name.c_str(), [data, kernel](benchmark::State& state) {
+        DescriptorMatchingOptions options;
+        options.kernel = kernel;
+        for (auto _ : state) benchmark::DoNotOptimize(MatchDescriptors(data->d1, data->d2, options));
+        state.counters["pairs_per_s"] = benchmark::Counter(state.iterations(), benchmark::Counter::kIsRate);
+      })->Unit(benchmark::kMillisecond)->UseRealTime();
+    }
     benchmark::RegisterBenchmark(("match/opencv_bf/" + size).c_str(), [data](benchmark::State& state) {
       for (auto _ : state) benchmark::DoNotOptimize(BfMatches(*data));
       state.counters["pairs_per_s"] = benchmark::Counter(state.iterations(), benchmark::Counter::kIsRate);
@@ -282,11 +303,9 @@ int main(int argc, char** argv) {
   std::printf("\nDescriptors: %s. Times in ms per pair (wall clock; CPU time in brackets),\n"
               "median over repetitions when --benchmark_repetitions is given.\n",
               rows.front().data->source.c_str());
-  std::printf("Kernel: %s.\n", Int8DescriptorKernelAvailable()
-                                   ? "int8 (AVX-512 VNNI); xcheck-float is the float GEMM kernel"
-                                   : "float GEMM (no AVX-512 VNNI on this CPU)");
-  std::printf("%-10s %-18s %-18s %-18s %-18s %-14s %-9s %-19s %-16s %s\n", "features", "loopsfm",
-              "loopsfm+xcheck", "xcheck-float", "opencv_bf", "pairs/s ours", "bf",
+  std::printf("Kernel: %s (auto).\n", DescriptorKernelName(FastestDescriptorKernel()).c_str());
+  std::printf("%-10s %-18s %-18s %-18s %-14s %-9s %-19s %-16s %s\n", "features", "loopsfm",
+              "loopsfm+xcheck", "opencv_bf", "pairs/s ours", "bf",
               "speed-up wall/cpu", "matches ours/bf", "agree");
   for (const Row& row : rows) {
     const std::string size = std::to_string(row.requested);
@@ -305,15 +324,39 @@ int main(int argc, char** argv) {
     std::snprintf(speedup, sizeof(speedup), "%.1fx / %.1fx", bf / ours,
                   reporter.CpuMs("match/opencv_bf/" + size) /
                       reporter.CpuMs("match/loopsfm/" + size));
-    std::printf("%-10s %-18s %-18s %-18s %-18s %-14.1f %-9.1f %-19s %-16s %.2f%%\n",
+    std::printf("%-10s %-18s %-18s %-18s %-14.1f %-9.1f %-19s %-16s %.2f%%\n",
                 features.c_str(), cell("match/loopsfm/" + size).c_str(),
                 cell("match/loopsfm_cross_check/" + size).c_str(),
-                cell("match/loopsfm_float_kernel/" + size).c_str(),
                 cell("match/opencv_bf/" + size).c_str(), 1000.0 / ours, 1000.0 / bf,
                 speedup, counts.c_str(),
                 100.0 * row.common / std::max<size_t>(1, std::max(row.ours, row.bf)));
   }
   std::printf("agree: matches found by both / the larger count. Both matchers single-threaded.\n");
+
+  // Every kernel on the same pairs: ms per pair, speed-up over the float kernel, and whether
+  // the matches are identical to the float kernel's.
+  std::printf("\nKernels (cross check, max distance 0.7): ms per pair, speed-up over float, "
+              "identical matches\n%-14s", "kernel");
+  for (const Row& row : rows) {
+    const std::string features =
+        std::to_string(row.data->d1.rows()) + "x" + std::to_string(row.data->d2.rows());
+    std::printf(" %-28s", features.c_str());
+  }
+  std::printf("\n");
+  for (const DescriptorKernel kernel : kernels) {
+    const std::string name = DescriptorKernelName(kernel);
+    std::printf("%-14s", name.c_str());
+    for (const Row& row : rows) {
+      const std::string size = std::to_string(row.requested);
+      const double ms = reporter.RealMs("match/kernel/" + name + "/" + size);
+      const double float_ms = reporter.RealMs("match/kernel/float/" + size);
+      char cell[64];
+      std::snprintf(cell, sizeof(cell), "%.2f  %.1fx  %s", ms, ms > 0 ? float_ms / ms : 0.0,
+                    row.identical.at(name) ? "identical" : "DIFFERENT");
+      std::printf(" %-28s", cell);
+    }
+    std::printf("\n");
+  }
   benchmark::Shutdown();
   return 0;
 }

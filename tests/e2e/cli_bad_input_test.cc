@@ -15,6 +15,7 @@
 #include <sstream>
 
 #include "cli_test_util.h"
+#include "loopsfm/matching/descriptor_matcher.h"
 
 namespace loopsfm::e2e {
 namespace {
@@ -377,6 +378,7 @@ TEST_F(CliBadInputTest, BadFlagValues) {
       {{"extract", images, "-d", new_db.string(), "--max-features", "-1"}, "--max-features.*-1"},
       {{"match", "-d", db_.string(), "--pairs", "foo"}, "foo.*exhaustive.*sequential"},
       {{"match", "-d", db_.string(), "--ratio", "1.5"}, "ratio.*1\\.5"},
+      {{"match", "-d", db_.string(), "--match-kernel", "sse9"}, "match-kernel.*sse9.*avx2"},
       {{"match", "-d", db_.string(), "--overlap", "0"}, "overlap.*\\b0\\b"},
       {{"match", "-d", db_.string(), "--pairs", "vocabtree", "--similarity-out",
         (dir() / "no_such_folder" / "sim.txt").string()},
@@ -465,6 +467,42 @@ TEST_F(CliBadInputTest, RerunningExtractAndMatchResumes) {
   EXPECT_TRUE(ContainsRegex(match2.output, "\\b15 pairs \\(15 already stored\\), 0 matched now"))
       << match2;
   EXPECT_EQ(SnapshotDatabase(db), matched) << "re-running match changed the database";
+}
+
+// Every kernel this CPU runs, named with --match-kernel or LOOPSFM_MATCH_KERNEL, stores the same
+// matches and geometries; one it does not run is refused before anything is matched.
+TEST_F(CliBadInputTest, EveryMatchingKernelStoresTheSameMatches) {
+  std::optional<DatabaseSnapshot> reference;
+  for (const DescriptorKernel kernel : AvailableDescriptorKernels()) {
+    const std::string name = DescriptorKernelName(kernel);
+    const fs::path db = dir() / (name + ".db");
+    const CommandResult extracted = RunLoopsfm({"extract", assets_->good_images.string(), "-d", db.string()});
+    ASSERT_EQ(extracted.exit_code, 0) << extracted;
+    const CommandResult matched =
+        kernel == DescriptorKernel::kFloat
+            ? RunShell("LOOPSFM_MATCH_KERNEL=float " + ShellQuote(LoopsfmBinary().string()) +
+                       " match -d " + ShellQuote(db.string()) + " --pairs exhaustive")
+            : RunLoopsfm({"match", "-d", db.string(), "--pairs", "exhaustive", "--match-kernel", name});
+    ASSERT_EQ(matched.exit_code, 0) << matched;
+    EXPECT_TRUE(ContainsRegex(matched.output, name + " kernel")) << matched;
+    const DatabaseSnapshot snapshot = SnapshotDatabase(db);
+    EXPECT_EQ(snapshot.matches.size(), 15u) << name;
+    if (!reference) {
+      reference = snapshot;
+    } else {
+      EXPECT_EQ(snapshot.matches, reference->matches) << name;
+      EXPECT_EQ(snapshot.verified, reference->verified) << name;
+    }
+  }
+  for (const DescriptorKernel kernel : {DescriptorKernel::kAvx512Vnni, DescriptorKernel::kAvx2,
+                                        DescriptorKernel::kNeonDotprod, DescriptorKernel::kNeon}) {
+    if (DescriptorKernelAvailable(kernel)) continue;
+    const CommandResult refused = RunLoopsfm(
+        {"match", "-d", db_.string(), "--match-kernel", DescriptorKernelName(kernel)});
+    ExpectUserError(refused);
+    EXPECT_TRUE(ContainsRegex(ErrorLine(refused), "does not run on this CPU")) << refused;
+  }
+  ExpectStoredDatabaseIntact();
 }
 
 TEST_F(CliBadInputTest, RerunWithOtherInputOrOptionsIsRefused) {

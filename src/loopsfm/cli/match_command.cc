@@ -43,9 +43,10 @@ void AddMatchCommand(CLI::App& app) {
     const MatchOptions options = flags->match.Resolve();
     const MatchReport report = MatchPairs(database, options);
     spdlog::info(
-        "match ({}): {} pairs ({} already stored), {} matched now, {} verified, {:.0f} mean "
-        "inliers; median {:.1f} ms matching + {:.1f} ms verification per pair; {:.1f} s",
-        PairStrategyName(options.strategy), report.num_pairs, report.num_pairs_resumed,
+        "match ({}, {} kernel): {} pairs ({} already stored), {} matched now, {} verified, "
+        "{:.0f} mean inliers; median {:.1f} ms matching + {:.1f} ms verification per pair; "
+        "{:.1f} s",
+        PairStrategyName(options.strategy), report.kernel, report.num_pairs, report.num_pairs_resumed,
         report.num_pairs_matched, report.num_pairs_verified, report.MeanInliers(),
         report.median_match_ms, report.median_verify_ms, report.seconds);
     if (!flags->json_report.empty()) {

@@ -127,6 +127,12 @@ void AddMatchFlags(CLI::App* cmd, MatchFlags* flags) {
   cmd->add_option("--ratio", flags->options.matcher.max_ratio,
                   "Lowe's ratio test threshold (0.8 default; 0.7 and 0.5 are stricter)")
       ->capture_default_str();
+  cmd->add_option("--match-kernel", flags->match_kernel,
+                  "Descriptor matching kernel: auto (the fastest this CPU runs), avx512-vnni, "
+                  "avx2, neon-dotprod, neon or float. All give identical matches; naming one "
+                  "measures or tests it (refused where the CPU lacks it)")
+      ->envname("LOOPSFM_MATCH_KERNEL")
+      ->capture_default_str();
   cmd->add_option("--max-error", flags->options.verification.max_error,
                   "RANSAC inlier threshold in pixels")
       ->capture_default_str();
@@ -156,6 +162,12 @@ MatchOptions MatchFlags::Resolve() const {
       throw InvalidArgument(fmt::format("--similarity-out: folder '{}' does not exist; create it "
                                         "or choose another path", folder.string()));
     }
+  }
+  try {
+    resolved.matcher.kernel = ParseDescriptorKernel(match_kernel);
+    resolved.matcher.Check();
+  } catch (const InvalidArgument& e) {
+    throw InvalidArgument(fmt::format("--match-kernel (or LOOPSFM_MATCH_KERNEL): {}", e.what()));
   }
   resolved.num_threads = Common().threads;
   resolved.show_progress = !Common().quiet;

@@ -33,6 +33,7 @@ struct MatchFlags {
   std::string pairs;
   MatchOptions options;
   std::string vocab;
+  std::string match_kernel = "auto";
   MatchOptions Resolve() const;
 };
 void AddMatchFlags(CLI::App* cmd, MatchFlags* flags);

@@ -5,14 +5,20 @@
 #include <cstring>
 #include <limits>
 #include <memory>
+#include <string>
 #include <vector>
 
 #include <Eigen/Core>
 
-#if defined(__x86_64__)
-#include <immintrin.h>
+#if defined(__aarch64__) && defined(__linux__)
+#include <asm/hwcap.h>
+#include <sys/auxv.h>
 #endif
 
+#include <fmt/format.h>
+#include <fmt/ranges.h>
+
+#include "loopsfm/matching/descriptor_kernels.h"
 #include "loopsfm/util/errors.h"
 
 namespace loopsfm {
@@ -183,41 +189,53 @@ void SearchBest2Float(const FeatureDescriptors& d1, const FeatureDescriptors& d2
       rows, cols);
 }
 
-#if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
-#define LOOPSFM_HAVE_VNNI_KERNEL 1
-#define LOOPSFM_VNNI_TARGET __attribute__((target("avx512f,avx512bw,avx512vnni")))
+// The integer kernels (descriptor_kernels.h): image 2 packed once per pair, tiles filled by
+// the kernel of this CPU's instruction set.
+struct IntegerKernel {
+  internal::FillDotTile fill = nullptr;
+  // x86: columns stored as b - 128 (unsigned by signed bytes); ARM: as b.
+  bool offset_columns = false;
+};
 
-// The int8 kernel (AVX-512 VNNI): vpdpbusd multiplies 64 unsigned by 64 signed bytes and adds
-// them in groups of four to 16 int32 lanes, four times the multiply-adds of a float FMA.
-// Image 2's descriptors b are stored as signed bytes b - 128, so a.b = a.(b - 128) +
-// 128 sum(a): the row term becomes |a|^2 - 256 sum(a), and the integer dot products stay
-// exact (|a.(b - 128)| < 2^23), as do their float copies.
-constexpr int kGroup = 16;                        // columns per packed group (one zmm of int32)
-constexpr int kGroupBytes = kGroup * kDescriptorDim;  // 2048
+IntegerKernel IntegerKernelFor(DescriptorKernel kernel) {
+  switch (kernel) {
+#if defined(__x86_64__)
+    case DescriptorKernel::kAvx512Vnni: return {internal::FillDotTileAvx512Vnni, true};
+    case DescriptorKernel::kAvx2: return {internal::FillDotTileAvx2, true};
+#endif
+#if defined(__aarch64__)
+    case DescriptorKernel::kNeonDotprod: return {internal::FillDotTileNeonDotprod, false};
+    case DescriptorKernel::kNeon: return {internal::FillDotTileNeon, false};
+#endif
+    default: return {};
+  }
+}
 
-// Image 2 in groups of 16 descriptors, within a group 32 blocks of 64 bytes: block q holds
-// bytes 4q..4q+3 of each of the 16 descriptors, minus 128. Padded to a multiple of 32
-// descriptors (two groups per kernel step) with infinite norms.
 struct PackedColumns {
   std::vector<int8_t> bytes;
   std::vector<float> sq_norms;
 };
 
-PackedColumns PackColumns(const FeatureDescriptors& d) {
+// Image 2 in the kernels' layout, padded to whole kernel steps with infinite norms.
+PackedColumns PackColumns(const FeatureDescriptors& d, bool offset) {
+  using internal::kPackedGroup;
+  using internal::kPackedGroupBytes;
   const int n = static_cast<int>(d.rows());
-  const int padded = (n + 2 * kGroup - 1) / (2 * kGroup) * (2 * kGroup);
+  const int step = internal::kKernelColumnStep;
+  const int padded = (n + step - 1) / step * step;
+  // b - 128 as a signed byte is b with its top bit flipped: 4 bytes at a time.
+  const uint32_t flip = offset ? 0x80808080u : 0u;
   PackedColumns packed;
   packed.bytes.assign(static_cast<size_t>(padded) * kDescriptorDim, 0);
   packed.sq_norms.assign(padded, kInf);
   for (int j = 0; j < n; ++j) {
     const uint8_t* row = d.data() + static_cast<size_t>(j) * kDescriptorDim;
-    int8_t* group = packed.bytes.data() + static_cast<size_t>(j / kGroup) * kGroupBytes;
-    const int lane = j % kGroup;
-    // b - 128 as a signed byte is b with its top bit flipped: 4 bytes at a time.
+    int8_t* group = packed.bytes.data() + static_cast<size_t>(j / kPackedGroup) * kPackedGroupBytes;
+    const int lane = j % kPackedGroup;
     for (int q = 0; q < kDescriptorDim / 4; ++q) {
       uint32_t quad;
       std::memcpy(&quad, row + 4 * q, sizeof(quad));
-      quad ^= 0x80808080u;
+      quad ^= flip;
       std::memcpy(group + q * 64 + lane * 4, &quad, sizeof(quad));
     }
     int32_t sq = 0;
@@ -227,9 +245,9 @@ PackedColumns PackColumns(const FeatureDescriptors& d) {
   return packed;
 }
 
-// |a|^2 - 256 sum(a) per row: the row term that goes with the offset column bytes.
-std::vector<float> OffsetRowNorms(const FeatureDescriptors& d) {
-  std::vector<float> norms(d.rows());
+// The row term that goes with the packed columns: |a|^2, minus 256 sum(a) when they are offset.
+std::vector<float> RowTerms(const FeatureDescriptors& d, bool offset) {
+  std::vector<float> terms(d.rows());
   for (Eigen::Index i = 0; i < d.rows(); ++i) {
     int32_t sq = 0, sum = 0;
     for (int k = 0; k < kDescriptorDim; ++k) {
@@ -237,85 +255,85 @@ std::vector<float> OffsetRowNorms(const FeatureDescriptors& d) {
       sq += v * v;
       sum += v;
     }
-    norms[i] = static_cast<float>(sq - 256 * sum);
+    terms[i] = static_cast<float>(offset ? sq - 256 * sum : sq);
   }
-  return norms;
-}
-
-// Dot products of kRows rows of a (unsigned bytes) with two packed groups, as floats into
-// tile rows of stride ld.
-template <int kRows>
-LOOPSFM_VNNI_TARGET inline void DotRowsTwoGroups(const uint8_t* a, const int8_t* groups,
-                                                 float* tile, int ld) {
-  __m512i acc[kRows][2];
-  for (int r = 0; r < kRows; ++r) acc[r][0] = acc[r][1] = _mm512_setzero_si512();
-  for (int q = 0; q < kDescriptorDim / 4; ++q) {
-    const __m512i b0 = _mm512_loadu_si512(groups + q * 64);
-    const __m512i b1 = _mm512_loadu_si512(groups + kGroupBytes + q * 64);
-    for (int r = 0; r < kRows; ++r) {
-      int32_t quad;
-      std::memcpy(&quad, a + r * kDescriptorDim + 4 * q, sizeof(quad));
-      const __m512i va = _mm512_set1_epi32(quad);
-      acc[r][0] = _mm512_dpbusd_epi32(acc[r][0], va, b0);
-      acc[r][1] = _mm512_dpbusd_epi32(acc[r][1], va, b1);
-    }
-  }
-  for (int r = 0; r < kRows; ++r) {
-    _mm512_storeu_ps(tile + r * ld, _mm512_cvtepi32_ps(acc[r][0]));
-    _mm512_storeu_ps(tile + r * ld + kGroup, _mm512_cvtepi32_ps(acc[r][1]));
-  }
-}
-
-LOOPSFM_VNNI_TARGET void FillTileVnni(const FeatureDescriptors& d1, const PackedColumns& packed,
-                                      int r0, int num_rows, int c0, int num_cols, float* tile) {
-  const uint8_t* a = d1.data() + static_cast<size_t>(r0) * kDescriptorDim;
-  const int8_t* first_group = packed.bytes.data() + static_cast<size_t>(c0 / kGroup) * kGroupBytes;
-  for (int c = 0; c < num_cols; c += 2 * kGroup) {
-    const int8_t* groups = first_group + static_cast<size_t>(c / kGroup) * kGroupBytes;
-    int r = 0;
-    for (; r + 4 <= num_rows; r += 4) {
-      DotRowsTwoGroups<4>(a + static_cast<size_t>(r) * kDescriptorDim, groups,
-                          tile + static_cast<size_t>(r) * num_cols + c, num_cols);
-    }
-    for (; r < num_rows; ++r) {
-      DotRowsTwoGroups<1>(a + static_cast<size_t>(r) * kDescriptorDim, groups,
-                          tile + static_cast<size_t>(r) * num_cols + c, num_cols);
-    }
-  }
+  return terms;
 }
 
 template <bool kColumns>
-void SearchBest2Vnni(const FeatureDescriptors& d1, const FeatureDescriptors& d2, Best2* rows,
-                     Best2* cols) {
-  static_assert(kColBlock % (2 * kGroup) == 0);
-  const PackedColumns packed = PackColumns(d2);
+void SearchBest2Integer(const FeatureDescriptors& d1, const FeatureDescriptors& d2,
+                        const IntegerKernel& kernel, Best2* rows, Best2* cols) {
+  static_assert(kColBlock % internal::kKernelColumnStep == 0);
+  static_assert(kDescriptorDim == internal::kKernelDim);
+  const PackedColumns packed = PackColumns(d2, kernel.offset_columns);
   SearchBest2<kColumns>(
-      static_cast<int>(d1.rows()), OffsetRowNorms(d1), packed.sq_norms,
+      static_cast<int>(d1.rows()), RowTerms(d1, kernel.offset_columns), packed.sq_norms,
       [&](int r0, int num_rows, int c0, int num_cols, float* tile) {
-        FillTileVnni(d1, packed, r0, num_rows, c0, num_cols, tile);
+        kernel.fill(d1.data() + static_cast<size_t>(r0) * kDescriptorDim, num_rows,
+                    packed.bytes.data() +
+                        static_cast<size_t>(c0 / internal::kPackedGroup) * internal::kPackedGroupBytes,
+                    num_cols, tile);
       },
       rows, cols);
 }
 
-bool CpuHasVnni() {
-  static const bool has = __builtin_cpu_supports("avx512f") &&
-                          __builtin_cpu_supports("avx512bw") &&
-                          __builtin_cpu_supports("avx512vnni");
-  return has;
-}
+bool CpuRuns(DescriptorKernel kernel) {
+  switch (kernel) {
+    case DescriptorKernel::kFloat: return true;
+#if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
+    case DescriptorKernel::kAvx512Vnni: {
+      static const bool has = __builtin_cpu_supports("avx512f") &&
+                              __builtin_cpu_supports("avx512bw") &&
+                              __builtin_cpu_supports("avx512vnni");
+      return has;
+    }
+    case DescriptorKernel::kAvx2: {
+      static const bool has = __builtin_cpu_supports("avx2");
+      return has;
+    }
+#endif
+#if defined(__aarch64__)
+    case DescriptorKernel::kNeon: return true;  // NEON is part of every ARMv8-A CPU
+    case DescriptorKernel::kNeonDotprod: {
+#if defined(__linux__)
+      static const bool has = (getauxval(AT_HWCAP) & HWCAP_ASIMDDP) != 0;
+      return has;
+#elif defined(__APPLE__)
+      return true;  // every Apple CPU with arm64 has it
 #else
-bool CpuHasVnni() { return false; }
+      return false;
 #endif
+    }
+#endif
+    default: return false;
+  }
+}
 
-// Best-2 search with the fastest exact kernel allowed and available.
+// The kernels, fastest first.
+constexpr DescriptorKernel kKernelsByPreference[] = {
+    DescriptorKernel::kAvx512Vnni, DescriptorKernel::kAvx2, DescriptorKernel::kNeonDotprod,
+    DescriptorKernel::kNeon, DescriptorKernel::kFloat};
+
+std::string UnavailableKernelMessage(DescriptorKernel kernel) {
+  std::vector<std::string> names;
+  for (const DescriptorKernel k : AvailableDescriptorKernels()) {
+    names.push_back(DescriptorKernelName(k));
+  }
+  return fmt::format("the {} matching kernel does not run on this CPU or was not built for it; "
+                     "this machine runs {} (or auto: the fastest)",
+                     DescriptorKernelName(kernel), fmt::join(names, ", "));
+}
+
+// Best-2 search with the requested kernel (kAuto: the fastest this CPU runs).
 template <bool kColumns>
-void SearchBest2Any(const FeatureDescriptors& d1, const FeatureDescriptors& d2, bool use_int8,
-                    Best2* rows, Best2* cols) {
-#ifdef LOOPSFM_HAVE_VNNI_KERNEL
-  if (use_int8 && CpuHasVnni()) return SearchBest2Vnni<kColumns>(d1, d2, rows, cols);
-#endif
-  (void)use_int8;
-  SearchBest2Float<kColumns>(d1, d2, rows, cols);
+void SearchBest2Any(const FeatureDescriptors& d1, const FeatureDescriptors& d2,
+                    DescriptorKernel kernel, Best2* rows, Best2* cols) {
+  if (kernel == DescriptorKernel::kAuto) kernel = FastestDescriptorKernel();
+  if (!DescriptorKernelAvailable(kernel)) {
+    throw InvalidArgument(UnavailableKernelMessage(kernel));
+  }
+  if (kernel == DescriptorKernel::kFloat) return SearchBest2Float<kColumns>(d1, d2, rows, cols);
+  SearchBest2Integer<kColumns>(d1, d2, IntegerKernelFor(kernel), rows, cols);
 }
 
 }  // namespace
@@ -326,13 +344,53 @@ void DescriptorMatchingOptions::Check() const {
   LOOPSFM_REQUIRE_OPTION(max_distance > 0.0,
                          "matching max_distance must be positive (2 disables it), got {}",
                          max_distance);
+  if (!DescriptorKernelAvailable(kernel)) throw InvalidArgument(UnavailableKernelMessage(kernel));
 }
 
-bool Int8DescriptorKernelAvailable() { return CpuHasVnni(); }
+std::string DescriptorKernelName(DescriptorKernel kernel) {
+  switch (kernel) {
+    case DescriptorKernel::kAuto: return "auto";
+    case DescriptorKernel::kFloat: return "float";
+    case DescriptorKernel::kAvx2: return "avx2";
+    case DescriptorKernel::kAvx512Vnni: return "avx512-vnni";
+    case DescriptorKernel::kNeon: return "neon";
+    case DescriptorKernel::kNeonDotprod: return "neon-dotprod";
+  }
+  return "?";
+}
+
+DescriptorKernel ParseDescriptorKernel(const std::string& name) {
+  for (const DescriptorKernel k :
+       {DescriptorKernel::kAuto, DescriptorKernel::kFloat, DescriptorKernel::kAvx2,
+        DescriptorKernel::kAvx512Vnni, DescriptorKernel::kNeon, DescriptorKernel::kNeonDotprod}) {
+    if (name == DescriptorKernelName(k)) return k;
+  }
+  throw InvalidArgument(fmt::format(
+      "unknown matching kernel '{}'; choose auto, float, avx2, avx512-vnni, neon or neon-dotprod",
+      name));
+}
+
+bool DescriptorKernelAvailable(DescriptorKernel kernel) {
+  if (kernel == DescriptorKernel::kAuto || kernel == DescriptorKernel::kFloat) return true;
+  return IntegerKernelFor(kernel).fill != nullptr && CpuRuns(kernel);
+}
+
+std::vector<DescriptorKernel> AvailableDescriptorKernels() {
+  std::vector<DescriptorKernel> kernels;
+  for (const DescriptorKernel k : kKernelsByPreference) {
+    if (DescriptorKernelAvailable(k)) kernels.push_back(k);
+  }
+  return kernels;
+}
+
+DescriptorKernel FastestDescriptorKernel() {
+  static const DescriptorKernel fastest = AvailableDescriptorKernels().front();
+  return fastest;
+}
 
 NearestNeighbors FindNearestNeighbors(const FeatureDescriptors& descriptors1,
                                       const FeatureDescriptors& descriptors2,
-                                      bool use_int8_kernel) {
+                                      DescriptorKernel kernel) {
   NearestNeighbors nn;
   const size_t n1 = descriptors1.rows();
   if (descriptors2.rows() == 0) {
@@ -342,7 +400,7 @@ NearestNeighbors FindNearestNeighbors(const FeatureDescriptors& descriptors1,
     return nn;
   }
   Best2 rows;
-  SearchBest2Any<false>(descriptors1, descriptors2, use_int8_kernel, &rows, nullptr);
+  SearchBest2Any<false>(descriptors1, descriptors2, kernel, &rows, nullptr);
   nn.index.assign(rows.idx.begin(), rows.idx.end());
   nn.best_distance = std::move(rows.d1);
   nn.second_distance = std::move(rows.d2);
@@ -359,9 +417,9 @@ FeatureMatches MatchDescriptors(const FeatureDescriptors& descriptors1,
   const int n2 = static_cast<int>(descriptors2.rows());
   Best2 rows, cols;
   if (options.cross_check) {
-    SearchBest2Any<true>(descriptors1, descriptors2, options.use_int8_kernel, &rows, &cols);
+    SearchBest2Any<true>(descriptors1, descriptors2, options.kernel, &rows, &cols);
   } else {
-    SearchBest2Any<false>(descriptors1, descriptors2, options.use_int8_kernel, &rows, nullptr);
+    SearchBest2Any<false>(descriptors1, descriptors2, options.kernel, &rows, nullptr);
   }
 
   // Squared distances are in uint8 units: a unit-length descriptor has norm 512.

@@ -2,11 +2,12 @@
 // Nearest-neighbour matching of SIFT descriptors with Lowe's ratio test and a cross check.
 //
 // Distances are exact. The dot products of the uint8 descriptors come from a blocked matrix
-// product: on CPUs with AVX-512 VNNI an integer kernel of our own (unsigned by signed bytes,
-// int32 sums), elsewhere Eigen's float GEMM on float copies, where every partial sum is an
-// integer below 2^24. The squared distance |a|^2 + |b|^2 - 2 a.b is exact either way, so both
-// kernels give identical matches; the best and second-best neighbours are found in the same
-// pass over each block, in both directions.
+// product: an integer kernel of our own for the CPU's instruction set (AVX-512 VNNI, AVX2,
+// NEON with or without the dot-product extension; descriptor_kernels.h), chosen at run time,
+// or Eigen's float GEMM on float copies, where every partial sum is an integer below 2^24. The
+// squared distance |a|^2 + |b|^2 - 2 a.b is exact either way, so every kernel gives identical
+// matches; the best and second-best neighbours are found in the same pass over each block, in
+// both directions.
 // Memory stays bounded (a few MB besides the float copies of the descriptors) whatever the
 // descriptor counts.
 //
@@ -14,9 +15,32 @@
 // threads (e.g. inside tbb::parallel_for). Eigen runs single-threaded unless the build adds
 // OpenMP, which loopsfm does not, so there is no nested parallelism.
 
+#include <string>
+#include <vector>
+
 #include "loopsfm/scene/features.h"
 
 namespace loopsfm {
+
+// Which dot-product kernel matches descriptors. All give identical matches; they differ in
+// speed and in the CPUs that run them.
+enum class DescriptorKernel {
+  kAuto,         // the fastest this CPU runs, in the order below
+  kAvx512Vnni,   // x86-64 with AVX-512 F, BW and VNNI
+  kAvx2,         // x86-64 with AVX2 (x86-64-v3)
+  kNeonDotprod,  // ARMv8.2-A and later with the dot-product extension
+  kNeon,         // every ARMv8-A CPU
+  kFloat,        // Eigen's float GEMM, everywhere
+};
+std::string DescriptorKernelName(DescriptorKernel kernel);  // "auto", "avx2", ...
+// Throws loopsfm::InvalidArgument naming the choices.
+DescriptorKernel ParseDescriptorKernel(const std::string& name);
+// Whether this build and CPU run the kernel (kAuto and kFloat always).
+bool DescriptorKernelAvailable(DescriptorKernel kernel);
+// The kernels this build and CPU run, fastest first (kFloat last; never kAuto).
+std::vector<DescriptorKernel> AvailableDescriptorKernels();
+// What kAuto runs.
+DescriptorKernel FastestDescriptorKernel();
 
 struct DescriptorMatchingOptions {
   // Lowe's ratio test: keep the nearest neighbour only when its L2 distance is below
@@ -28,9 +52,9 @@ struct DescriptorMatchingOptions {
   // Keep i -> j only when j's nearest neighbour in the first image is i, and j -> i passes
   // the ratio and distance tests too (COLMAP's cross check).
   bool cross_check = true;
-  // Use the integer kernel where the CPU has AVX-512 VNNI (identical results, several times
-  // faster); false forces the float kernel (tests, benchmarks).
-  bool use_int8_kernel = true;
+  // The dot-product kernel; a named one must run on this CPU (tests, benchmarks, `loopsfm match
+  // --match-kernel`).
+  DescriptorKernel kernel = DescriptorKernel::kAuto;
 
   // Throws loopsfm::InvalidArgument with a readable message.
   void Check() const;
@@ -53,9 +77,6 @@ struct NearestNeighbors {
 };
 NearestNeighbors FindNearestNeighbors(const FeatureDescriptors& descriptors1,
                                       const FeatureDescriptors& descriptors2,
-                                      bool use_int8_kernel = true);
-
-// Whether this CPU runs the integer kernel (AVX-512 VNNI).
-bool Int8DescriptorKernelAvailable();
+                                      DescriptorKernel kernel = DescriptorKernel::kAuto);
 
 }  // namespace loopsfm

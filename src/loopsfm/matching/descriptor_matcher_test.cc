@@ -134,9 +134,9 @@ PermutedSet MakePermutedSet(int n1, int num_shared, int num_distractors, double 
 }
 
 void ExpectAgreesWithBruteForce(const FeatureDescriptors& d1, const FeatureDescriptors& d2,
-                                bool use_int8_kernel) {
+                                DescriptorKernel kernel) {
   const int n1 = static_cast<int>(d1.rows()), n2 = static_cast<int>(d2.rows());
-  const NearestNeighbors nn = FindNearestNeighbors(d1, d2, use_int8_kernel);
+  const NearestNeighbors nn = FindNearestNeighbors(d1, d2, kernel);
   const Reference ref = BruteForce(d1, d2);
   ASSERT_EQ(nn.index.size(), static_cast<size_t>(n1));
   for (int i = 0; i < n1; ++i) {
@@ -150,30 +150,71 @@ void ExpectAgreesWithBruteForce(const FeatureDescriptors& d1, const FeatureDescr
   }
 }
 
-// Both kernels: the float one always, the integer one where the CPU has AVX-512 VNNI (else
-// the flag falls back to the float kernel and this repeats it).
-TEST(FindNearestNeighbors, AgreesExactlyWithBruteForce) {
-  if (!Int8DescriptorKernelAvailable()) {
-    std::printf("note: no AVX-512 VNNI on this CPU; only the float kernel is tested\n");
+// Every kernel this CPU runs (the float one always; AVX2 and AVX-512 VNNI on x86-64, NEON on
+// ARM, where the CPU has them).
+std::vector<DescriptorKernel> KernelsToTest() {
+  std::vector<DescriptorKernel> kernels = AvailableDescriptorKernels();
+  std::string names;
+  for (const DescriptorKernel k : kernels) names.append(" ").append(DescriptorKernelName(k));
+  std::printf("note: kernels tested on this CPU:%s\n", names.c_str());
+  return kernels;
+}
+
+// d1 against d2 and d2 against d1, with every kernel.
+void ExpectEveryKernelAgreesBothWays(const FeatureDescriptors& d1, const FeatureDescriptors& d2) {
+  for (const DescriptorKernel kernel : KernelsToTest()) {
+    SCOPED_TRACE(DescriptorKernelName(kernel));
+    ExpectAgreesWithBruteForce(d1, d2, kernel);
+    ExpectAgreesWithBruteForce(d2, d1, kernel);
   }
-  for (const bool use_int8 : {false, true}) {
+}
+
+TEST(DescriptorKernels, FloatIsAlwaysAvailableAndAutoRunsTheFastest) {
+  const std::vector<DescriptorKernel> kernels = AvailableDescriptorKernels();
+  ASSERT_FALSE(kernels.empty());
+  EXPECT_EQ(kernels.back(), DescriptorKernel::kFloat);
+  EXPECT_EQ(FastestDescriptorKernel(), kernels.front());
+  EXPECT_TRUE(DescriptorKernelAvailable(DescriptorKernel::kAuto));
+#if defined(__x86_64__)
+  EXPECT_FALSE(DescriptorKernelAvailable(DescriptorKernel::kNeon));
+#endif
+}
+
+TEST(DescriptorKernels, NamesRoundTripAndUnknownOrUnavailableOnesAreRefused) {
+  for (const DescriptorKernel k :
+       {DescriptorKernel::kAuto, DescriptorKernel::kFloat, DescriptorKernel::kAvx2,
+        DescriptorKernel::kAvx512Vnni, DescriptorKernel::kNeon, DescriptorKernel::kNeonDotprod}) {
+    EXPECT_EQ(ParseDescriptorKernel(DescriptorKernelName(k)), k);
+  }
+  EXPECT_THROW(ParseDescriptorKernel("sse9"), InvalidArgument);
+  for (const DescriptorKernel k : {DescriptorKernel::kAvx2, DescriptorKernel::kAvx512Vnni,
+                                   DescriptorKernel::kNeon, DescriptorKernel::kNeonDotprod}) {
+    if (DescriptorKernelAvailable(k)) continue;
+    DescriptorMatchingOptions options;
+    options.kernel = k;
+    EXPECT_THROW(options.Check(), InvalidArgument) << DescriptorKernelName(k);
+  }
+}
+
+TEST(FindNearestNeighbors, EveryKernelAgreesExactlyWithBruteForce) {
+  for (const DescriptorKernel kernel : KernelsToTest()) {
+    SCOPED_TRACE(DescriptorKernelName(kernel));
     Random random(7);
     // Sizes that span several GEMM row and column blocks and are not multiples of the lanes
-    // (nor of the integer kernel's 4 rows and 32 columns).
+    // (nor of the integer kernels' 2 or 4 rows and 32 columns).
     for (const auto& [n1, n2] : {std::pair{1, 1}, {3, 2}, {600, 1500}, {257, 1041}, {5, 33}}) {
       // Half of image 1 is a noisy copy of image 2, so near and far neighbours both occur.
       const FeatureDescriptors d2 = RandomDescriptors(n2, random);
       FeatureDescriptors d1 = RandomDescriptors(n1, random);
       for (int i = 0; i < n1 / 2; ++i) d1.row(i) = d2.row(i % n2);
-      SCOPED_TRACE(use_int8 ? "int8 kernel" : "float kernel");
-      ExpectAgreesWithBruteForce(d1, d2, use_int8);
+      ExpectAgreesWithBruteForce(d1, d2, kernel);
     }
   }
 }
 
 // Bytes over the whole 0..255 range, all-0 and all-255 rows included: the largest dot
 // products and norms the integer and float arithmetic must hold exactly.
-TEST(FindNearestNeighbors, ExactOverTheFullByteRange) {
+TEST(FindNearestNeighbors, EveryKernelIsExactOverTheFullByteRange) {
   Random random(17);
   auto random_bytes = [&](int n) {
     FeatureDescriptors d(n, kDescriptorDim);
@@ -184,27 +225,43 @@ TEST(FindNearestNeighbors, ExactOverTheFullByteRange) {
     d.row(1).setZero();
     return d;
   };
-  const FeatureDescriptors d1 = random_bytes(70), d2 = random_bytes(45);
-  for (const bool use_int8 : {false, true}) {
-    SCOPED_TRACE(use_int8 ? "int8 kernel" : "float kernel");
-    ExpectAgreesWithBruteForce(d1, d2, use_int8);
-    ExpectAgreesWithBruteForce(d2, d1, use_int8);
-  }
+  ExpectEveryKernelAgreesBothWays(random_bytes(70), random_bytes(45));
+}
+
+// Mostly bytes below 128 with a byte of 128..255 in some rows, so blocks of rows with and
+// without one sit side by side (the AVX2 kernel splits only the latter), remainder rows
+// included; image 2 has a column of all 255 and one of all 0 (b - 128 at both ends).
+TEST(FindNearestNeighbors, EveryKernelIsExactWithAFewLargeBytes) {
+  Random random(23);
+  auto bytes = [&](int n, int every) {
+    FeatureDescriptors d(n, kDescriptorDim);
+    for (int i = 0; i < n; ++i) {
+      for (int k = 0; k < kDescriptorDim; ++k) d(i, k) = static_cast<uint8_t>(random.UniformInt(0, 127));
+      if (i % every == 3) d(i, random.UniformInt(0, kDescriptorDim - 1)) = static_cast<uint8_t>(random.UniformInt(128, 255));
+    }
+    return d;
+  };
+  const FeatureDescriptors d1 = bytes(263, 7);
+  FeatureDescriptors d2 = bytes(97, 5);
+  d2.row(10).setConstant(255);
+  d2.row(11).setZero();
+  d2.row(12).setConstant(128);
+  ExpectEveryKernelAgreesBothWays(d1, d2);
 }
 
 TEST(MatchDescriptors, AgreesWithReferenceMatcher) {
   Random random(11);
   const PermutedSet set = MakePermutedSet(700, 500, 900, 0.05, random);
-  for (const bool use_int8 : {false, true}) {
+  for (const DescriptorKernel kernel : KernelsToTest()) {
     for (const bool cross_check : {false, true}) {
       for (const double max_distance : {0.7, 2.0}) {
         DescriptorMatchingOptions options;
-        options.use_int8_kernel = use_int8;
+        options.kernel = kernel;
         options.cross_check = cross_check;
         options.max_distance = max_distance;
         EXPECT_EQ(MatchDescriptors(set.d1, set.d2, options),
                   ReferenceMatches(set.d1, set.d2, options))
-            << "int8 " << use_int8 << " cross_check " << cross_check << " max_distance "
+            << DescriptorKernelName(kernel) << " cross_check " << cross_check << " max_distance "
             << max_distance;
       }
     }

@@ -215,7 +215,6 @@ ExtractReport ExtractFeatures(const std::filesystem::path& input, Database& data
                 }) &
             tbb::make_filter<std::shared_ptr<WorkItem>, void>(
                 tbb::filter_mode::serial_in_order, [&](std::shared_ptr<WorkItem> item) {
-                  const RawFrame& raw = item->keyframe.frame;
                   ++report.frames_decoded;
                   progress.Advance();
                   if (item->resumed) {

@@ -168,6 +168,9 @@ MatchReport MatchPairs(Database& database, const MatchOptions& options) {
   CheckFingerprint(database, "match", MatchFingerprint(options));
   Timer timer;
   MatchReport report;
+  report.kernel = DescriptorKernelName(options.matcher.kernel == DescriptorKernel::kAuto
+                                           ? FastestDescriptorKernel()
+                                           : options.matcher.kernel);
   std::vector<image_t> ordered_ids;
   for (const Frame& frame : FramesInCaptureOrder(database)) ordered_ids.push_back(frame.image_id);
   PairMatcher matcher(database, options);
@@ -207,6 +210,7 @@ nlohmann::json ToJson(const MatchReport& r) {
           {"load_seconds", r.load_seconds},
           {"median_match_ms", r.median_match_ms},
           {"median_verify_ms", r.median_verify_ms},
+          {"kernel", r.kernel},
           {"lowres_prefilter_seconds", r.lowres_prefilter_seconds},
           {"lowres_num_passed", r.lowres_num_passed},
           {"vocab",

@@ -101,6 +101,8 @@ struct MatchReport {
   // Per matched pair: descriptor matching time (median, ms) and verification time.
   double median_match_ms = 0.0;
   double median_verify_ms = 0.0;
+  // The descriptor matching kernel that ran ("avx2", ...; auto resolved).
+  std::string kernel;
   // Filled by the vocabtree strategy.
   VocabTreeTimings vocab;
   // Filled by the lowres strategy: prefilter time and pairs it let through.

@@ -223,11 +223,12 @@ ReconstructReport Reconstruct(const fs::path& input, const fs::path& output_dir,
   stage.Restart();
   report.match = MatchPairs(database, options.match);
   report.stage_times.push_back({"match", stage.ElapsedSeconds()});
-  spdlog::info("match ({}): {} pairs ({} matched now, {} stored before), {} verified now, {:.0f} "
-               "mean inliers",
-               PairStrategyName(options.match.strategy), report.match.num_pairs,
-               report.match.num_pairs_matched, report.match.num_pairs_resumed,
-               report.match.num_pairs_verified, report.match.MeanInliers());
+  spdlog::info("match ({}, {} kernel): {} pairs ({} matched now, {} stored before), {} verified "
+               "now, {:.0f} mean inliers",
+               PairStrategyName(options.match.strategy), report.match.kernel,
+               report.match.num_pairs, report.match.num_pairs_matched,
+               report.match.num_pairs_resumed, report.match.num_pairs_verified,
+               report.match.MeanInliers());
 
   if (options.fill_in_rounds > 0 && database.ReadMeta("keyframes")) {
     stage.Restart();
