@@ -14,6 +14,7 @@
 // A kernel writes the exact integer t(r, c) (as a float: |t| < 2^24) such that
 //   |a_r - b_c|^2 = row_term(a_r) + |b_c|^2 - 2 t(r, c).
 
+#include <cstddef>
 #include <cstdint>
 
 namespace loopsfm::internal {

@@ -1,13 +1,13 @@
 #include "loopsfm/matching/descriptor_matcher.h"
 
 #include <gtest/gtest.h>
-#include <tbb/parallel_for.h>
 
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <limits>
 #include <set>
+#include <thread>
 
 #include "loopsfm/math/random.h"
 #include "loopsfm/util/errors.h"
@@ -384,9 +384,13 @@ TEST(MatchDescriptors, ParallelCallsGiveTheSerialResults) {
   const DescriptorMatchingOptions options;
   std::vector<FeatureMatches> serial, parallel(sets.size());
   for (const PermutedSet& s : sets) serial.push_back(MatchDescriptors(s.d1, s.d2, options));
-  tbb::parallel_for(size_t{0}, sets.size(), [&](size_t k) {
-    parallel[k] = MatchDescriptors(sets[k].d1, sets[k].d2, options);
-  });
+  // Plain threads, one pair each (the pipeline runs pairs in tbb::parallel_for; std::thread
+  // keeps this test free of TBB, so that it also cross-compiles for the NEON kernels).
+  std::vector<std::thread> threads;
+  for (size_t k = 0; k < sets.size(); ++k) {
+    threads.emplace_back([&, k] { parallel[k] = MatchDescriptors(sets[k].d1, sets[k].d2, options); });
+  }
+  for (std::thread& t : threads) t.join();
   EXPECT_EQ(parallel, serial);
 }
 
