@@ -15,6 +15,7 @@
 #include <cstring>
 
 #include "loopsfm/matching/descriptor_kernels.h"
+#include "loopsfm/matching/descriptor_search.h"
 
 namespace loopsfm::internal {
 namespace {
@@ -54,8 +55,7 @@ struct Residual {
   uint32_t quad;  // max(a - 127, 0), byte-wise
 };
 
-}  // namespace
-
+// The num_rows x num_cols dot products of rows with the packed columns (descriptor_kernels.h).
 void FillDotTileAvx2(const uint8_t* rows, int num_rows, const int8_t* packed, int num_cols,
                      float* tile) {
   constexpr int kRows = 4;
@@ -111,5 +111,9 @@ void FillDotTileAvx2(const uint8_t* rows, int num_rows, const int8_t* packed, in
     }
   }
 }
+
+}  // namespace
+
+void SearchAvx2(const IntegerSearch& search) { RunIntegerSearch(search, FillDotTileAvx2); }
 
 }  // namespace loopsfm::internal

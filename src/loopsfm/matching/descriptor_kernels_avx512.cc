@@ -10,6 +10,7 @@
 #include <cstring>
 
 #include "loopsfm/matching/descriptor_kernels.h"
+#include "loopsfm/matching/descriptor_search.h"
 
 namespace loopsfm::internal {
 namespace {
@@ -37,8 +38,7 @@ inline void DotRowsTwoGroups(const uint8_t* a, const int8_t* groups, float* tile
   }
 }
 
-}  // namespace
-
+// The num_rows x num_cols dot products of rows with the packed columns (descriptor_kernels.h).
 void FillDotTileAvx512Vnni(const uint8_t* rows, int num_rows, const int8_t* packed, int num_cols,
                            float* tile) {
   for (int c = 0; c < num_cols; c += kKernelColumnStep) {
@@ -54,5 +54,9 @@ void FillDotTileAvx512Vnni(const uint8_t* rows, int num_rows, const int8_t* pack
     }
   }
 }
+
+}  // namespace
+
+void SearchAvx512Vnni(const IntegerSearch& search) { RunIntegerSearch(search, FillDotTileAvx512Vnni); }
 
 }  // namespace loopsfm::internal

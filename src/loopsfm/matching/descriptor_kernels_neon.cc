@@ -11,6 +11,7 @@
 #include <cstring>
 
 #include "loopsfm/matching/descriptor_kernels.h"
+#include "loopsfm/matching/descriptor_search.h"
 
 namespace loopsfm::internal {
 namespace {
@@ -46,8 +47,7 @@ inline void DotRowsGroup(const uint8_t* a, const int8_t* group, float* tile, int
   }
 }
 
-}  // namespace
-
+// The num_rows x num_cols dot products of rows with the packed columns (descriptor_kernels.h).
 void FillDotTileNeon(const uint8_t* rows, int num_rows, const int8_t* packed, int num_cols,
                      float* tile) {
   for (int c = 0; c < num_cols; c += kPackedGroup) {
@@ -63,5 +63,9 @@ void FillDotTileNeon(const uint8_t* rows, int num_rows, const int8_t* packed, in
     }
   }
 }
+
+}  // namespace
+
+void SearchNeon(const IntegerSearch& search) { RunIntegerSearch(search, FillDotTileNeon); }
 
 }  // namespace loopsfm::internal

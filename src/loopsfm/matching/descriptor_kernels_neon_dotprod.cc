@@ -9,6 +9,7 @@
 #include <arm_neon.h>
 
 #include "loopsfm/matching/descriptor_kernels.h"
+#include "loopsfm/matching/descriptor_search.h"
 
 namespace loopsfm::internal {
 namespace {
@@ -48,8 +49,7 @@ inline void DotRowsGroup(const uint8_t* a, const int8_t* group, float* tile, int
   }
 }
 
-}  // namespace
-
+// The num_rows x num_cols dot products of rows with the packed columns (descriptor_kernels.h).
 void FillDotTileNeonDotprod(const uint8_t* rows, int num_rows, const int8_t* packed,
                             int num_cols, float* tile) {
   for (int c = 0; c < num_cols; c += kPackedGroup) {
@@ -65,5 +65,9 @@ void FillDotTileNeonDotprod(const uint8_t* rows, int num_rows, const int8_t* pac
     }
   }
 }
+
+}  // namespace
+
+void SearchNeonDotprod(const IntegerSearch& search) { RunIntegerSearch(search, FillDotTileNeonDotprod); }
 
 }  // namespace loopsfm::internal

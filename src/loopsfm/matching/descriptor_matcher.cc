@@ -19,6 +19,7 @@
 #include <fmt/ranges.h>
 
 #include "loopsfm/matching/descriptor_kernels.h"
+#include "loopsfm/matching/descriptor_search.h"
 #include "loopsfm/util/errors.h"
 
 namespace loopsfm {
@@ -27,13 +28,7 @@ namespace {
 using RowMatrixXf = Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
 
 constexpr float kInf = std::numeric_limits<float>::infinity();
-// The running best-2 of a row is kept per lane (column index modulo kLanes), so the scan over
-// a row of dot products vectorises; the lanes are merged once per row.
-constexpr int kLanes = 16;
-// GEMM tile: kRowBlock x kColBlock dot products (1 MB) stay in L2 while they are scanned.
-constexpr int kRowBlock = 256;
-constexpr int kColBlock = 1024;
-static_assert(kColBlock % kLanes == 0);
+using internal::kLanes;
 
 // Float copies of uint8 descriptors, rows padded with zeros to a multiple of `pad`; padded
 // rows get an infinite squared norm so that they are never anyone's neighbour.
@@ -58,119 +53,26 @@ FloatDescriptors ToFloat(const FeatureDescriptors& descriptors, int pad) {
 struct Best2 {
   std::vector<float> d1, d2;
   std::vector<int32_t> idx;
-  void Init(size_t n) {
-    d1.assign(n, kInf);
-    d2.assign(n, kInf);
-    idx.assign(n, -1);
+  // Sized for n entries, which the search writes.
+  internal::Best2Arrays Arrays(size_t n) {
+    d1.resize(n);
+    d2.resize(n);
+    idx.resize(n);
+    return {d1.data(), d2.data(), idx.data()};
   }
 };
 
-// Updates the best-2 of one row (per lane) and of every column with one tile row of dot
-// products. Ties keep the lowest index, as a sequential search would. The lanes are GCC / Clang
-// vector-extension types, compiled to one AVX-512 register or two AVX2 ones (or SSE), so the
-// row's best-2 stays in registers and each step is a few compare-and-select instructions.
-template <bool kColumns>
-inline void ScanTileRow(const float* __restrict dots, int num_cols, float a2,
-                        const float* __restrict b2, int32_t row_index, int32_t col_offset,
-                        float* __restrict lane_d1, float* __restrict lane_d2,
-                        int32_t* __restrict lane_idx, float* __restrict c1,
-                        float* __restrict c2, int32_t* __restrict ci) {
-  using FloatLanes = float __attribute__((vector_size(kLanes * sizeof(float))));
-  using IntLanes = int32_t __attribute__((vector_size(kLanes * sizeof(int32_t))));
-  FloatLanes l1, l2;
-  IntLanes li;
-  std::memcpy(&l1, lane_d1, sizeof(l1));
-  std::memcpy(&l2, lane_d2, sizeof(l2));
-  std::memcpy(&li, lane_idx, sizeof(li));
-  IntLanes col_index;
-  for (int l = 0; l < kLanes; ++l) col_index[l] = col_offset + l;
-  for (int c = 0; c < num_cols; c += kLanes) {
-    FloatLanes dot, b;
-    std::memcpy(&dot, dots + c, sizeof(dot));
-    std::memcpy(&b, b2 + c, sizeof(b));
-    const FloatLanes d = a2 + b - 2.0f * dot;
-    const IntLanes lt = d < l1;
-    l2 = lt ? l1 : (d < l2 ? d : l2);
-    li = lt ? col_index : li;
-    l1 = lt ? d : l1;
-    col_index += kLanes;
-    if constexpr (kColumns) {
-      FloatLanes cb1, cb2;
-      IntLanes cbi;
-      std::memcpy(&cb1, c1 + c, sizeof(cb1));
-      std::memcpy(&cb2, c2 + c, sizeof(cb2));
-      std::memcpy(&cbi, ci + c, sizeof(cbi));
-      const IntLanes clt = d < cb1;
-      cb2 = clt ? cb1 : (d < cb2 ? d : cb2);
-      cbi = clt ? IntLanes{} + row_index : cbi;
-      cb1 = clt ? d : cb1;
-      std::memcpy(c1 + c, &cb1, sizeof(cb1));
-      std::memcpy(c2 + c, &cb2, sizeof(cb2));
-      std::memcpy(ci + c, &cbi, sizeof(cbi));
-    }
-  }
-  std::memcpy(lane_d1, &l1, sizeof(l1));
-  std::memcpy(lane_d2, &l2, sizeof(l2));
-  std::memcpy(lane_idx, &li, sizeof(li));
-}
-
-// Exact best-2 search in both directions (columns only when kColumns), tile by tile:
-// fill_tile(r0, num_rows, c0, num_cols, tile) writes the num_rows x num_cols dot products
-// (row-major) such that row_norms[r] + col_norms[c] - 2 tile(r, c) is the squared distance.
-// Columns are padded to a multiple of kLanes with infinite norms.
-template <bool kColumns, typename FillTile>
-void SearchBest2(int n1, const std::vector<float>& row_norms,
-                 const std::vector<float>& col_norms, FillTile&& fill_tile, Best2* rows,
-                 Best2* cols) {
-  const int n2_padded = static_cast<int>(col_norms.size());
-  rows->Init(n1);
-  if (kColumns) cols->Init(n2_padded);
+// The search's scratch memory (1 MB of tile, lanes of a row block).
+struct SearchScratchMemory {
   // Every tile entry is written before it is read: no need to zero 1 MB per pair.
-  const std::unique_ptr<float[]> tile(new float[static_cast<size_t>(kRowBlock) * kColBlock]);
-  std::vector<float> lane_d1(static_cast<size_t>(kRowBlock) * kLanes);
-  std::vector<float> lane_d2(lane_d1.size());
-  std::vector<int32_t> lane_idx(lane_d1.size());
-
-  for (int r0 = 0; r0 < n1; r0 += kRowBlock) {
-    const int num_rows = std::min(kRowBlock, n1 - r0);
-    std::fill(lane_d1.begin(), lane_d1.end(), kInf);
-    std::fill(lane_d2.begin(), lane_d2.end(), kInf);
-    std::fill(lane_idx.begin(), lane_idx.end(), -1);
-    for (int c0 = 0; c0 < n2_padded; c0 += kColBlock) {
-      const int num_cols = std::min(kColBlock, n2_padded - c0);
-      fill_tile(r0, num_rows, c0, num_cols, tile.get());
-      for (int r = 0; r < num_rows; ++r) {
-        ScanTileRow<kColumns>(tile.get() + static_cast<size_t>(r) * num_cols, num_cols,
-                              row_norms[r0 + r], col_norms.data() + c0, r0 + r, c0,
-                              lane_d1.data() + r * kLanes, lane_d2.data() + r * kLanes,
-                              lane_idx.data() + r * kLanes,
-                              kColumns ? cols->d1.data() + c0 : nullptr,
-                              kColumns ? cols->d2.data() + c0 : nullptr,
-                              kColumns ? cols->idx.data() + c0 : nullptr);
-      }
-    }
-    // Merge the lanes of each row into its best-2.
-    for (int r = 0; r < num_rows; ++r) {
-      float b1 = kInf, b2 = kInf;
-      int32_t bi = -1;
-      for (int l = 0; l < kLanes; ++l) {
-        const float d = lane_d1[r * kLanes + l];
-        const int32_t i = lane_idx[r * kLanes + l];
-        if (i >= 0 && (d < b1 || (d == b1 && i < bi))) {
-          b2 = std::min(b2, b1);
-          b1 = d;
-          bi = i;
-        } else {
-          b2 = std::min(b2, d);
-        }
-        b2 = std::min(b2, lane_d2[r * kLanes + l]);
-      }
-      rows->d1[r0 + r] = b1;
-      rows->d2[r0 + r] = b2;
-      rows->idx[r0 + r] = bi;
-    }
+  std::unique_ptr<float[]> tile{new float[static_cast<size_t>(internal::kRowBlock) * internal::kColBlock]};
+  std::vector<float> lane_best = std::vector<float>(internal::kRowBlock * kLanes);
+  std::vector<float> lane_second = std::vector<float>(internal::kRowBlock * kLanes);
+  std::vector<int32_t> lane_index = std::vector<int32_t>(internal::kRowBlock * kLanes);
+  internal::SearchScratch View() {
+    return {tile.get(), lane_best.data(), lane_second.data(), lane_index.data()};
   }
-}
+};
 
 // The float kernel: Eigen's GEMM on float copies (exact: every partial sum is an integer
 // below 2^24).
@@ -179,20 +81,23 @@ void SearchBest2Float(const FeatureDescriptors& d1, const FeatureDescriptors& d2
                       Best2* cols) {
   const FloatDescriptors f1 = ToFloat(d1, 1);
   const FloatDescriptors f2 = ToFloat(d2, kLanes);
-  SearchBest2<kColumns>(
-      f1.num, f1.sq_norms, f2.sq_norms,
+  SearchScratchMemory scratch;
+  const int n2_padded = static_cast<int>(f2.sq_norms.size());
+  internal::SearchBest2<kColumns>(
+      f1.num, f1.sq_norms.data(), n2_padded, f2.sq_norms.data(),
       [&](int r0, int num_rows, int c0, int num_cols, float* tile) {
         Eigen::Map<RowMatrixXf> dots(tile, num_rows, num_cols);
         dots.noalias() =
             f1.values.middleRows(r0, num_rows) * f2.values.middleRows(c0, num_cols).transpose();
       },
-      rows, cols);
+      scratch.View(), rows->Arrays(f1.num),
+      kColumns ? cols->Arrays(n2_padded) : internal::Best2Arrays{});
 }
 
 // The integer kernels (descriptor_kernels.h): image 2 packed once per pair, tiles filled by
 // the kernel of this CPU's instruction set.
 struct IntegerKernel {
-  internal::FillDotTile fill = nullptr;
+  internal::IntegerSearchFn search = nullptr;
   // x86: columns stored as b - 128 (unsigned by signed bytes); ARM: as b.
   bool offset_columns = false;
 };
@@ -200,12 +105,12 @@ struct IntegerKernel {
 IntegerKernel IntegerKernelFor(DescriptorKernel kernel) {
   switch (kernel) {
 #if defined(__x86_64__)
-    case DescriptorKernel::kAvx512Vnni: return {internal::FillDotTileAvx512Vnni, true};
-    case DescriptorKernel::kAvx2: return {internal::FillDotTileAvx2, true};
+    case DescriptorKernel::kAvx512Vnni: return {internal::SearchAvx512Vnni, true};
+    case DescriptorKernel::kAvx2: return {internal::SearchAvx2, true};
 #endif
 #if defined(__aarch64__)
-    case DescriptorKernel::kNeonDotprod: return {internal::FillDotTileNeonDotprod, false};
-    case DescriptorKernel::kNeon: return {internal::FillDotTileNeon, false};
+    case DescriptorKernel::kNeonDotprod: return {internal::SearchNeonDotprod, false};
+    case DescriptorKernel::kNeon: return {internal::SearchNeon, false};
 #endif
     default: return {};
   }
@@ -260,21 +165,23 @@ std::vector<float> RowTerms(const FeatureDescriptors& d, bool offset) {
   return terms;
 }
 
-template <bool kColumns>
 void SearchBest2Integer(const FeatureDescriptors& d1, const FeatureDescriptors& d2,
                         const IntegerKernel& kernel, Best2* rows, Best2* cols) {
-  static_assert(kColBlock % internal::kKernelColumnStep == 0);
   static_assert(kDescriptorDim == internal::kKernelDim);
   const PackedColumns packed = PackColumns(d2, kernel.offset_columns);
-  SearchBest2<kColumns>(
-      static_cast<int>(d1.rows()), RowTerms(d1, kernel.offset_columns), packed.sq_norms,
-      [&](int r0, int num_rows, int c0, int num_cols, float* tile) {
-        kernel.fill(d1.data() + static_cast<size_t>(r0) * kDescriptorDim, num_rows,
-                    packed.bytes.data() +
-                        static_cast<size_t>(c0 / internal::kPackedGroup) * internal::kPackedGroupBytes,
-                    num_cols, tile);
-      },
-      rows, cols);
+  const std::vector<float> row_terms = RowTerms(d1, kernel.offset_columns);
+  SearchScratchMemory scratch;
+  internal::IntegerSearch search;
+  search.rows = d1.data();
+  search.num_rows = static_cast<int>(d1.rows());
+  search.row_terms = row_terms.data();
+  search.packed = packed.bytes.data();
+  search.num_cols = static_cast<int>(packed.sq_norms.size());
+  search.col_norms = packed.sq_norms.data();
+  search.scratch = scratch.View();
+  search.row_best = rows->Arrays(search.num_rows);
+  if (cols != nullptr) search.col_best = cols->Arrays(search.num_cols);
+  kernel.search(search);
 }
 
 bool CpuRuns(DescriptorKernel kernel) {
@@ -333,7 +240,7 @@ void SearchBest2Any(const FeatureDescriptors& d1, const FeatureDescriptors& d2,
     throw InvalidArgument(UnavailableKernelMessage(kernel));
   }
   if (kernel == DescriptorKernel::kFloat) return SearchBest2Float<kColumns>(d1, d2, rows, cols);
-  SearchBest2Integer<kColumns>(d1, d2, IntegerKernelFor(kernel), rows, cols);
+  SearchBest2Integer(d1, d2, IntegerKernelFor(kernel), rows, kColumns ? cols : nullptr);
 }
 
 }  // namespace
@@ -372,7 +279,7 @@ DescriptorKernel ParseDescriptorKernel(const std::string& name) {
 
 bool DescriptorKernelAvailable(DescriptorKernel kernel) {
   if (kernel == DescriptorKernel::kAuto || kernel == DescriptorKernel::kFloat) return true;
-  return IntegerKernelFor(kernel).fill != nullptr && CpuRuns(kernel);
+  return IntegerKernelFor(kernel).search != nullptr && CpuRuns(kernel);
 }
 
 std::vector<DescriptorKernel> AvailableDescriptorKernels() {
