@@ -1,7 +1,7 @@
 #include "loopsfm/matching/guided_pairing.h"
 
 #include <algorithm>
-#include <queue>
+#include <cstdlib>
 
 #include "loopsfm/util/errors.h"
 
@@ -21,71 +21,67 @@ void GuidedPairingOptions::Check() const {
 
 namespace {
 
-using BoolMatrix = Eigen::Matrix<bool, Eigen::Dynamic, Eigen::Dynamic>;
-
 struct IndexPair {
   int i, j;  // i < j
 };
 
-// The k best untried pairs (i < j), best first, ties by index for determinism.
-// `skip(i, j)` leaves a pair out.
-template <typename Skip>
-std::vector<IndexPair> BestUntriedPairs(const Eigen::MatrixXf& scores, const BoolMatrix& tried,
-                                        const BoolMatrix& proposed, int k, int min_gap,
-                                        const Skip& skip) {
-  using Entry = std::pair<float, std::pair<int, int>>;
-  // Min-heap of the best k seen so far.
-  auto worse = [](const Entry& a, const Entry& b) {
-    if (a.first != b.first) return a.first > b.first;
-    return a.second < b.second;
+// The loop candidates as distinct pairs (i < j), best first (ties by index, for determinism); a
+// pair listed by both of its frames takes the higher of the two scores.
+std::vector<IndexPair> RankedCandidatePairs(const std::vector<std::vector<ScoredIndex>>& candidates,
+                                            int min_gap) {
+  struct Entry {
+    float score;
+    int i, j;
   };
-  std::priority_queue<Entry, std::vector<Entry>, decltype(worse)> heap(worse);
-  const int n = static_cast<int>(scores.rows());
-  for (int i = 0; i < n; ++i) {
-    for (int j = i + 1 + min_gap; j < n; ++j) {
-      if (tried(i, j) || proposed(i, j) || skip(i, j)) continue;
-      const Entry entry{std::max(scores(i, j), scores(j, i)), {i, j}};
-      if (static_cast<int>(heap.size()) < k) {
-        heap.push(entry);
-      } else if (worse(entry, heap.top())) {
-        heap.pop();
-        heap.push(entry);
-      }
+  std::vector<Entry> entries;
+  for (int i = 0; i < static_cast<int>(candidates.size()); ++i) {
+    for (const ScoredIndex& c : candidates[i]) {
+      if (std::abs(c.index - i) <= min_gap) continue;
+      entries.push_back({c.score, std::min(i, c.index), std::max(i, c.index)});
     }
   }
-  std::vector<IndexPair> best;
-  while (!heap.empty()) {
-    best.push_back({heap.top().second.first, heap.top().second.second});
-    heap.pop();
-  }
-  std::reverse(best.begin(), best.end());
-  return best;
+  // Each pair once, with its best score: by pair, best score first, then by score.
+  std::sort(entries.begin(), entries.end(), [](const Entry& a, const Entry& b) {
+    return a.i != b.i ? a.i < b.i : a.j != b.j ? a.j < b.j : a.score > b.score;
+  });
+  entries.erase(std::unique(entries.begin(), entries.end(),
+                            [](const Entry& a, const Entry& b) { return a.i == b.i && a.j == b.j; }),
+                entries.end());
+  std::sort(entries.begin(), entries.end(), [](const Entry& a, const Entry& b) {
+    return a.score != b.score ? a.score > b.score : a.i != b.i ? a.i < b.i : a.j < b.j;
+  });
+  std::vector<IndexPair> ranked;
+  ranked.reserve(entries.size());
+  for (const Entry& e : entries) ranked.push_back({e.i, e.j});
+  return ranked;
 }
 
 }  // namespace
 
-GuidedPairingReport RunGuidedPairing(const Eigen::MatrixXf& scores,
+GuidedPairingReport RunGuidedPairing(const std::vector<std::vector<ScoredIndex>>& candidates,
                                      const std::vector<image_t>& image_ids,
                                      const GuidedPairingOptions& options,
-                                     const VerifyPairsFn& verify, BoolMatrix* tried,
-                                     BoolMatrix* verified, const BoolMatrix* sequential) {
+                                     const VerifyPairsFn& verify, IndexPairSet* tried,
+                                     IndexPairSet* verified, const IndexPairSet* sequential) {
   options.Check();
   const int n = static_cast<int>(image_ids.size());
-  LOOPSFM_CHECK(scores.rows() == n && scores.cols() == n);
-  LOOPSFM_CHECK(tried->rows() == n && verified->rows() == n);
-  LOOPSFM_CHECK(sequential == nullptr || (sequential->rows() == n && sequential->cols() == n));
+  LOOPSFM_CHECK(static_cast<int>(candidates.size()) == n);
+  LOOPSFM_CHECK(tried->NumFrames() == n && verified->NumFrames() == n);
+  LOOPSFM_CHECK(sequential == nullptr || sequential->NumFrames() == n);
   GuidedPairingReport report;
+  const std::vector<IndexPair> ranked = RankedCandidatePairs(candidates, options.min_frame_gap);
   // Score proposals of the next round: k in the first, then as many as the previous round's
   // score proposals verified, until more than max_failure_ratio of a round's fail.
   int num_by_score = options.num_proposals > 0 ? options.num_proposals : n;
 
   // Verified partners beyond the sequential window, per frame.
+  auto is_loop_pair = [&](int i, int j) {
+    return std::abs(i - j) > options.min_frame_gap &&
+           !(sequential != nullptr && sequential->Contains(i, j));
+  };
   std::vector<int> loop_partners(n, 0);
   for (int i = 0; i < n; ++i) {
-    for (int j = 0; j < n; ++j) {
-      loop_partners[i] += (*verified)(i, j) && std::abs(i - j) > options.min_frame_gap &&
-                          !(sequential != nullptr && (*sequential)(i, j));
-    }
+    for (const int j : verified->Partners(i)) loop_partners[i] += is_loop_pair(i, j);
   }
   // Proposals of the current round count as partners until verified or not, so one round's
   // growth along a wide band does not overshoot the limit.
@@ -101,13 +97,13 @@ GuidedPairingReport RunGuidedPairing(const Eigen::MatrixXf& scores,
   std::vector<IndexPair> last_verified;
 
   for (int round = 0; round < options.max_rounds; ++round) {
-    BoolMatrix proposed = BoolMatrix::Constant(n, n, false);
+    IndexPairSet proposed(n);
     std::vector<IndexPair> proposals;
     auto propose = [&](int i, int j) {
       if (i == j || i < 0 || j < 0 || i >= n || j >= n) return false;
       if (i > j) std::swap(i, j);
-      if ((*tried)(i, j) || proposed(i, j) || saturated(i, j)) return false;
-      proposed(i, j) = true;
+      if (tried->Contains(i, j) || proposed.Contains(i, j) || saturated(i, j)) return false;
+      proposed.Insert(i, j);
       if (j - i > options.min_frame_gap) {
         ++pending[i];
         ++pending[j];
@@ -121,11 +117,15 @@ GuidedPairingReport RunGuidedPairing(const Eigen::MatrixXf& scores,
       for (int d = 0; d < 4; ++d) stats.num_from_growing += propose(p.i + di[d], p.j + dj[d]);
     }
     const size_t first_from_scores = proposals.size();
-    if (num_by_score > 0) {
-      for (const IndexPair& p : BestUntriedPairs(scores, *tried, proposed, num_by_score, options.min_frame_gap, saturated)) {
-        stats.num_from_scores += propose(p.i, p.j);
-      }
+    // The num_by_score best candidates neither tried, grown into nor saturated before this
+    // round's score proposals (which then count as pending, as they are proposed).
+    std::vector<IndexPair> best;
+    for (size_t c = 0; c < ranked.size() && static_cast<int>(best.size()) < num_by_score; ++c) {
+      const auto [i, j] = ranked[c];
+      if (tried->Contains(i, j) || proposed.Contains(i, j) || saturated(i, j)) continue;
+      best.push_back(ranked[c]);
     }
+    for (const IndexPair& p : best) stats.num_from_scores += propose(p.i, p.j);
     if (proposals.empty()) break;
 
     std::vector<ImagePair> pairs;
@@ -137,9 +137,9 @@ GuidedPairingReport RunGuidedPairing(const Eigen::MatrixXf& scores,
     last_verified.clear();
     for (size_t m = 0; m < proposals.size(); ++m) {
       const IndexPair& p = proposals[m];
-      (*tried)(p.i, p.j) = (*tried)(p.j, p.i) = true;
+      tried->Insert(p.i, p.j);
       if (ok[m]) {
-        (*verified)(p.i, p.j) = (*verified)(p.j, p.i) = true;
+        verified->Insert(p.i, p.j);
         last_verified.push_back(p);
         if (p.j - p.i > options.min_frame_gap) {
           ++loop_partners[p.i];

@@ -1,7 +1,7 @@
 #pragma once
 // Vocabulary-tree guided pair selection with region growing.
 //
-// Each round proposes (a) the highest-scoring pairs of the similarity matrix not tried yet, and
+// Each round proposes (a) the highest-scoring loop candidates not tried yet, and
 // (b) the horizontal and vertical neighbours in the match matrix, (i±1, j) and (i, j±1), of
 // every pair verified in the previous round (video frames that see the same place come in
 // runs, so a verified pair's neighbours are likely to verify too). The caller matches and
@@ -10,7 +10,8 @@
 // The first round proposes k pairs by score; each later round proposes by score as many as
 // the previous round's score proposals verified, and none any more once more than
 // max_failure_ratio of a round's score proposals failed (the similarity matrix has nothing
-// left to offer). Region growing goes on as long as it verifies pairs; the rounds end when
+// left to offer). The candidates are each frame's best-scoring frames beyond the sequential
+// window (ImageDatabase::Candidates), so no n x n matrix is needed. Region growing goes on as long as it verifies pairs; the rounds end when
 // nothing is proposed. Measured on a 400-frame street with one loop against exhaustive
 // matching (bench/guided_matching/policy_sim.py): a fixed k with the stop rule applied to all
 // of a round's proposals matched 16248 pairs for 96.5 % of exhaustive's 12734 verified pairs;
@@ -21,8 +22,8 @@
 #include <functional>
 #include <vector>
 
-#include <Eigen/Core>
-
+#include "loopsfm/matching/pair_set.h"
+#include "loopsfm/retrieval/image_database.h"
 #include "loopsfm/util/types.h"
 
 namespace loopsfm {
@@ -64,21 +65,21 @@ struct GuidedPairingReport {
 // Matches and verifies the given pairs; returns one flag per pair (true: verified).
 using VerifyPairsFn = std::function<std::vector<bool>(const std::vector<ImagePair>&)>;
 
-// `scores` is the n x n similarity of `image_ids` (row/column i is image_ids[i], which
-// are in capture order so that neighbouring indices are neighbouring frames). `tried`
-// marks pairs matched before (e.g. sequential neighbours), which are never proposed again:
-// n x n, symmetric; `verified` likewise marks which of them verified. Both are updated with
-// this run's pairs. Verified pairs count as loop partners when they are more than
-// min_frame_gap apart and not marked in `sequential` (optional, n x n: the pairs the
-// sequential part covered, e.g. its i + 2^k steps and wider first windows, which are
-// temporal neighbours, not links to another pass). Pairs verified by an earlier run count,
-// so a resumed run does not match the loop bands again (it may try one more round of score
+// `candidates[i]` are frame i's loop candidates: its best-scoring frames more than
+// min_frame_gap indices away (ImageDatabase::Candidates, `far`), indices into `image_ids`, which
+// are in capture order so that neighbouring indices are neighbouring frames. `tried` holds
+// pairs matched before (e.g. sequential neighbours), which are never proposed again; `verified`
+// which of them verified. Both are updated with this run's pairs. Verified pairs count as loop
+// partners when they are more than min_frame_gap apart and not in `sequential` (optional: the
+// pairs the sequential part covered, e.g. its i + 2^k steps and wider first windows, which are
+// temporal neighbours, not links to another pass). Pairs verified by an earlier run count, so a
+// resumed run does not match the loop bands again (it may try one more round of score
 // proposals for frames below the limit).
-GuidedPairingReport RunGuidedPairing(
-    const Eigen::MatrixXf& scores, const std::vector<image_t>& image_ids,
-    const GuidedPairingOptions& options, const VerifyPairsFn& verify,
-    Eigen::Matrix<bool, Eigen::Dynamic, Eigen::Dynamic>* tried,
-    Eigen::Matrix<bool, Eigen::Dynamic, Eigen::Dynamic>* verified,
-    const Eigen::Matrix<bool, Eigen::Dynamic, Eigen::Dynamic>* sequential = nullptr);
+GuidedPairingReport RunGuidedPairing(const std::vector<std::vector<ScoredIndex>>& candidates,
+                                     const std::vector<image_t>& image_ids,
+                                     const GuidedPairingOptions& options,
+                                     const VerifyPairsFn& verify, IndexPairSet* tried,
+                                     IndexPairSet* verified,
+                                     const IndexPairSet* sequential = nullptr);
 
 }  // namespace loopsfm

@@ -3,11 +3,13 @@
 #include <gtest/gtest.h>
 
 #include "loopsfm/math/random.h"
+#include "loopsfm/matching/pairing_test_util.h"
 
 namespace loopsfm {
 namespace {
 
-using BoolMatrix = Eigen::Matrix<bool, Eigen::Dynamic, Eigen::Dynamic>;
+// Loop candidates per frame, as the pipeline keeps them.
+constexpr int kCandidates = 32;
 
 // 100 frames; frames 90..99 revisit frames 0..9. A pair truly matches when the frames are
 // within 2 of each other along the path or across the loop.
@@ -51,10 +53,8 @@ TEST(GuidedPairing, RegionGrowingCoversTheLoopBlockAndStops) {
   }
   scores = (scores + scores.transpose()).eval() / 2;
   // Sequential neighbours matched beforehand.
-  BoolMatrix tried = BoolMatrix::Constant(n, n, false), verified = tried;
-  for (int i = 0; i < n; ++i) {
-    for (int j = i + 1; j < n && j <= i + 2; ++j) tried(i, j) = tried(j, i) = verified(i, j) = verified(j, i) = true;
-  }
+  IndexPairSet tried(n), verified(n);
+  InsertBand(n, 2, {&tried, &verified});
   size_t calls = 0;
   auto verify = [&](const std::vector<ImagePair>& pairs) {
     ++calls;
@@ -65,7 +65,9 @@ TEST(GuidedPairing, RegionGrowingCoversTheLoopBlockAndStops) {
   GuidedPairingOptions options;
   options.num_proposals = 20;
   options.max_loop_partners = 0;  // every loop pair, for recall
-  const GuidedPairingReport report = RunGuidedPairing(scores, ids, options, verify, &tried, &verified);
+  const GuidedPairingReport report = RunGuidedPairing(
+      CandidatesFromMatrix(scores, kCandidates, options.min_frame_gap), ids, options, verify,
+      &tried, &verified);
 
   // Every true loop pair is found.
   int loop_pairs = 0, found = 0;
@@ -73,7 +75,7 @@ TEST(GuidedPairing, RegionGrowingCoversTheLoopBlockAndStops) {
     for (int b = 90; b < n; ++b) {
       if (!TrulyMatches(a, b)) continue;
       ++loop_pairs;
-      found += verified(a, b);
+      found += verified.Contains(a, b);
     }
   }
   EXPECT_EQ(found, loop_pairs);
@@ -95,14 +97,15 @@ TEST(GuidedPairing, RegionGrowingCoversTheLoopBlockAndStops) {
   // Region growing ran dry: every neighbour of a verified loop pair was tried.
   for (int a = 0; a < 10; ++a) {
     for (int b = 90; b < n; ++b) {
-      if (!verified(a, b)) continue;
-      EXPECT_TRUE(tried(a + 1, b) && tried(a, b - 1) && tried(a, std::min(b + 1, n - 1)))
+      if (!verified.Contains(a, b)) continue;
+      EXPECT_TRUE(tried.Contains(a + 1, b) && tried.Contains(a, b - 1) &&
+                  (b + 1 >= n || tried.Contains(a, b + 1)))
           << a << ", " << b;
     }
   }
   EXPECT_GT(report.rounds[1].num_from_growing, 0u);
   // Nothing is tried twice: tried pairs = sequential + proposals.
-  EXPECT_EQ(static_cast<size_t>(tried.count() / 2), 197u + report.num_tried);
+  EXPECT_EQ(tried.Size(), 197u + report.num_tried);
 }
 
 // A slow revisit: frames 60..89 see what frames 0..29 saw, each within 6 frames of its
@@ -118,12 +121,10 @@ TEST(GuidedPairing, LoopPartnerLimitThinsAWideBand) {
     return a < 30 && b >= 60 && b < 90 && std::abs(a - (b - 60)) <= 6;
   };
   const Eigen::MatrixXf scores = ScoresFromTruth(n, truth, /*min_true_score=*/0.4, /*seed=*/4);
-  auto run = [&](int max_loop_partners, BoolMatrix* verified) {
-    BoolMatrix tried = BoolMatrix::Constant(n, n, false);
-    *verified = tried;
-    for (int i = 0; i < n; ++i) {
-      for (int j = i + 1; j < n && j <= i + 3; ++j) tried(i, j) = tried(j, i) = (*verified)(i, j) = (*verified)(j, i) = true;
-    }
+  auto run = [&](int max_loop_partners, IndexPairSet* verified) {
+    IndexPairSet tried(n);
+    *verified = IndexPairSet(n);
+    InsertBand(n, 3, {&tried, verified});
     auto verify = [&](const std::vector<ImagePair>& pairs) {
       std::vector<bool> ok;
       for (const ImagePair& p : pairs) ok.push_back(truth(p.image_id1 - 1, p.image_id2 - 1));
@@ -133,20 +134,21 @@ TEST(GuidedPairing, LoopPartnerLimitThinsAWideBand) {
     options.num_proposals = 20;
     options.min_frame_gap = 3;
     options.max_loop_partners = max_loop_partners;
-    return RunGuidedPairing(scores, ids, options, verify, &tried, verified);
+    return RunGuidedPairing(CandidatesFromMatrix(scores, kCandidates, options.min_frame_gap), ids,
+                            options, verify, &tried, verified);
   };
-  auto loop_partners = [&](const BoolMatrix& verified, int i) {
+  auto loop_partners = [&](const IndexPairSet& verified, int i) {
     int count = 0;
-    for (int j = 0; j < n; ++j) count += verified(i, j) && std::abs(i - j) > 3;
+    for (int j = 0; j < n; ++j) count += verified.Contains(i, j) && std::abs(i - j) > 3;
     return count;
   };
-  BoolMatrix all, thin;
+  IndexPairSet all, thin;
   const GuidedPairingReport full = run(0, &all);
   const GuidedPairingReport thinned = run(3, &thin);
-  auto band = [](const BoolMatrix& verified) {
+  auto band = [](const IndexPairSet& verified) {
     int count = 0;
     for (int a = 0; a < 30; ++a) {
-      for (int b = 60; b < 90; ++b) count += verified(a, b);
+      for (int b = 60; b < 90; ++b) count += verified.Contains(a, b);
     }
     return count;
   };
@@ -175,12 +177,13 @@ TEST(GuidedPairing, SequentialPairsAreNotLoopPartnersAndResumingTriesNothing) {
     return a < 10 && b >= 50 && std::abs(a - (b - 50)) <= 3;
   };
   const Eigen::MatrixXf scores = ScoresFromTruth(n, truth, /*min_true_score=*/0.5, /*seed=*/5);
-  BoolMatrix tried = BoolMatrix::Constant(n, n, false), verified = tried, sequential = tried;
+  IndexPairSet tried(n), verified(n), sequential(n);
   for (int i = 0; i < n; ++i) {
     for (int d : {1, 2, 3, 8, 16}) {
       if (i + d >= n) continue;
-      tried(i, i + d) = tried(i + d, i) = sequential(i, i + d) = sequential(i + d, i) = true;
-      verified(i, i + d) = verified(i + d, i) = truth(i, i + d);
+      tried.Insert(i, i + d);
+      sequential.Insert(i, i + d);
+      if (truth(i, i + d)) verified.Insert(i, i + d);
     }
   }
   auto verify = [&](const std::vector<ImagePair>& pairs) {
@@ -192,17 +195,18 @@ TEST(GuidedPairing, SequentialPairsAreNotLoopPartnersAndResumingTriesNothing) {
   options.num_proposals = 20;
   options.min_frame_gap = 3;
   options.max_loop_partners = 2;
+  const auto candidates = CandidatesFromMatrix(scores, kCandidates, options.min_frame_gap);
   // Counting the i + 8 and i + 16 pairs, every frame would start saturated.
-  BoolMatrix tried_counting = tried, verified_counting = verified;
-  EXPECT_EQ(RunGuidedPairing(scores, ids, options, verify, &tried_counting, &verified_counting).num_verified, 0u);
-  const GuidedPairingReport first = RunGuidedPairing(scores, ids, options, verify, &tried, &verified, &sequential);
+  IndexPairSet tried_counting = tried, verified_counting = verified;
+  EXPECT_EQ(RunGuidedPairing(candidates, ids, options, verify, &tried_counting, &verified_counting).num_verified, 0u);
+  const GuidedPairingReport first = RunGuidedPairing(candidates, ids, options, verify, &tried, &verified, &sequential);
   EXPECT_GT(first.num_verified, 10u);
   for (int a = 0; a < 10; ++a) {
     int partners = 0;
-    for (int b = 50; b < n; ++b) partners += verified(a, b);
+    for (int b = 50; b < n; ++b) partners += verified.Contains(a, b);
     EXPECT_GE(partners, 1) << a;
   }
-  const GuidedPairingReport resumed = RunGuidedPairing(scores, ids, options, verify, &tried, &verified, &sequential);
+  const GuidedPairingReport resumed = RunGuidedPairing(candidates, ids, options, verify, &tried, &verified, &sequential);
   EXPECT_LE(resumed.num_tried, static_cast<size_t>(options.num_proposals)) << first.num_tried;
 }
 

@@ -35,14 +35,13 @@ struct FrameState {
 SequentialWavesReport RunSequentialWaves(
     const std::vector<image_t>& ordered_ids, const SequentialPairingOptions& window,
     const SequentialWavesOptions& options,
-    const VerifyPairsFn& verify, Eigen::Matrix<bool, Eigen::Dynamic, Eigen::Dynamic>* tried,
-    Eigen::Matrix<bool, Eigen::Dynamic, Eigen::Dynamic>* verified,
-    Eigen::Matrix<bool, Eigen::Dynamic, Eigen::Dynamic>* covered) {
+    const VerifyPairsFn& verify, IndexPairSet* tried, IndexPairSet* verified,
+    IndexPairSet* covered) {
   window.Check();
   options.Check();
   const int n = static_cast<int>(ordered_ids.size());
-  LOOPSFM_CHECK(tried->rows() == n && tried->cols() == n && verified->rows() == n);
-  if (covered != nullptr) *covered = Eigen::Matrix<bool, Eigen::Dynamic, Eigen::Dynamic>::Constant(n, n, false);
+  LOOPSFM_CHECK(tried->NumFrames() == n && verified->NumFrames() == n);
+  if (covered != nullptr) *covered = IndexPairSet(n);
   auto window_of = [&](int i) {
     return i < window.num_initial_frames ? window.initial_overlap : window.overlap;
   };
@@ -70,7 +69,7 @@ SequentialWavesReport RunSequentialWaves(
     std::vector<ImagePair> wave;
     std::vector<size_t> wave_index;  // position in `from` of each pair sent to verify
     for (size_t k = 0; k < from.size(); ++k) {
-      if (!(*tried)(from[k], from[k] + d)) {
+      if (!tried->Contains(from[k], from[k] + d)) {
         wave.emplace_back(ordered_ids[from[k]], ordered_ids[from[k] + d]);
         wave_index.push_back(k);
       }
@@ -80,8 +79,8 @@ SequentialWavesReport RunSequentialWaves(
       LOOPSFM_CHECK(ok.size() == wave.size());
       for (size_t m = 0; m < wave.size(); ++m) {
         const int i = from[wave_index[m]], j = i + d;
-        (*tried)(i, j) = (*tried)(j, i) = true;
-        (*verified)(i, j) = (*verified)(j, i) = ok[m];
+        tried->Insert(i, j);
+        if (ok[m]) verified->Insert(i, j);
         ++report.num_tried;
         report.num_verified += ok[m];
         if (quadratic[wave_index[m]]) {
@@ -92,9 +91,9 @@ SequentialWavesReport RunSequentialWaves(
     }
     for (size_t k = 0; k < from.size(); ++k) {
       const int i = from[k];
-      if (covered != nullptr) (*covered)(i, i + d) = (*covered)(i + d, i) = true;
+      if (covered != nullptr) covered->Insert(i, i + d);
       FrameState& s = state[i];
-      const bool ok = (*verified)(i, i + d);
+      const bool ok = verified->Contains(i, i + d);
       if (quadratic[k]) {
         s.quadratic_failures = ok ? 0 : s.quadratic_failures + 1;
         if (s.quadratic_failures >= options.max_quadratic_failures) s.quadratic_open = false;

@@ -13,9 +13,8 @@
 
 #include <vector>
 
-#include <Eigen/Core>
-
 #include "loopsfm/matching/guided_pairing.h"
+#include "loopsfm/matching/pair_set.h"
 #include "loopsfm/matching/pair_selection.h"
 
 namespace loopsfm {
@@ -40,18 +39,17 @@ struct SequentialWavesReport {
   size_t num_quadratic_verified = 0;
 };
 
-// `tried` and `verified` are n x n symmetric masks over `ordered_ids` (capture order); pairs
-// already tried are not proposed again (their verified flag stands for the result) and both
-// masks are updated with this run's pairs. `covered` (optional, n x n) is set for every pair
+// `tried` and `verified` are sets of index pairs over `ordered_ids` (capture order); pairs
+// already tried are not proposed again (whether they are in `verified` stands for the result)
+// and both sets are updated with this run's pairs. `covered` (optional) is set to every pair
 // the waves reached, tried now or before: the same set when a run is resumed.
 // `window` gives the window sizes (overlap, and initial_overlap for the first
 // num_initial_frames frames); its quadratic_overlap flag is not used (the waves have their own).
 SequentialWavesReport RunSequentialWaves(const std::vector<image_t>& ordered_ids,
                                          const SequentialPairingOptions& window,
                                          const SequentialWavesOptions& options,
-                                         const VerifyPairsFn& verify,
-                                         Eigen::Matrix<bool, Eigen::Dynamic, Eigen::Dynamic>* tried,
-                                         Eigen::Matrix<bool, Eigen::Dynamic, Eigen::Dynamic>* verified,
-                                         Eigen::Matrix<bool, Eigen::Dynamic, Eigen::Dynamic>* covered = nullptr);
+                                         const VerifyPairsFn& verify, IndexPairSet* tried,
+                                         IndexPairSet* verified,
+                                         IndexPairSet* covered = nullptr);
 
 }  // namespace loopsfm

@@ -9,11 +9,12 @@
 namespace loopsfm {
 namespace {
 
-using BoolMatrix = Eigen::Matrix<bool, Eigen::Dynamic, Eigen::Dynamic>;
-
 struct WavesRun {
-  BoolMatrix tried, verified;
+  IndexPairSet tried, verified;
   SequentialWavesReport report;
+  int NumComponents() const {
+    return ConnectedComponents(verified.NumFrames(), verified.SortedPairs()).NumComponents();
+  }
 };
 
 // Runs the waves over n frames whose pairs verify when truth(i, j) (i < j) says so.
@@ -21,12 +22,12 @@ WavesRun RunWaves(int n, const std::function<bool(int, int)>& truth, const Seque
              SequentialPairingOptions window = {}) {
   std::vector<image_t> ids(n);
   for (int i = 0; i < n; ++i) ids[i] = 100 + i;
-  WavesRun run{BoolMatrix::Constant(n, n, false), BoolMatrix::Constant(n, n, false), {}};
+  WavesRun run{IndexPairSet(n), IndexPairSet(n), {}};
   auto verify = [&](const std::vector<ImagePair>& pairs) {
     std::vector<bool> ok;
     for (const ImagePair& p : pairs) {
       const int i = static_cast<int>(p.image_id1) - 100, j = static_cast<int>(p.image_id2) - 100;
-      EXPECT_FALSE(run.tried(i, j)) << "pair tried twice: " << i << ", " << j;
+      EXPECT_FALSE(run.tried.Contains(i, j)) << "pair tried twice: " << i << ", " << j;
       ok.push_back(truth(std::min(i, j), std::max(i, j)));
     }
     return ok;
@@ -43,14 +44,14 @@ TEST(SequentialWaves, WindowGoesPastFailuresAndStopsAfterSeveral) {
   options.max_quadratic_step = 0;
   const WavesRun run = RunWaves(60, truth, options);
   // Frame 28 goes on past 30 to 31 (verified); 29 reaches 32.
-  EXPECT_TRUE(run.verified(28, 31));
-  EXPECT_TRUE(run.verified(29, 32));
+  EXPECT_TRUE(run.verified.Contains(28, 31));
+  EXPECT_TRUE(run.verified.Contains(29, 32));
   // A frame in the open tries d = 1..6: three verified, then three failures with d >= 5.
-  for (int d = 1; d <= 6; ++d) EXPECT_TRUE(run.tried(10, 10 + d)) << d;
-  EXPECT_FALSE(run.tried(10, 17));
+  for (int d = 1; d <= 6; ++d) EXPECT_TRUE(run.tried.Contains(10, 10 + d)) << d;
+  EXPECT_FALSE(run.tried.Contains(10, 17));
   // Frame 30 itself tries the minimum window and stops (5 failures, the last 3 past d >= 3).
-  for (int d = 1; d <= 5; ++d) EXPECT_TRUE(run.tried(30, 30 + d)) << d;
-  EXPECT_FALSE(run.tried(30, 36));
+  for (int d = 1; d <= 5; ++d) EXPECT_TRUE(run.tried.Contains(30, 30 + d)) << d;
+  EXPECT_FALSE(run.tried.Contains(30, 36));
   EXPECT_EQ(run.report.num_quadratic_tried, 0u);
 }
 
@@ -68,17 +69,17 @@ TEST(SequentialWaves, QuadraticStepsBridgeAnAbruptTurn) {
     no_quadratic.max_quadratic_step = 0;
     return RunWaves(100, truth, no_quadratic);
   }();
-  EXPECT_EQ(ConnectedComponents(plain.verified).NumComponents(), 2);
+  EXPECT_EQ(plain.NumComponents(), 2);
   const WavesRun run = RunWaves(100, truth, options);
-  EXPECT_EQ(ConnectedComponents(run.verified).NumComponents(), 1);
+  EXPECT_EQ(run.NumComponents(), 1);
   // i + 16 for i in 40..49 crosses the turn.
-  for (int i = 40; i < 50; ++i) EXPECT_TRUE(run.verified(i, i + 16)) << i;
+  for (int i = 40; i < 50; ++i) EXPECT_TRUE(run.verified.Contains(i, i + 16)) << i;
   EXPECT_GE(run.report.num_quadratic_verified, 10u);
   // Quadratic steps stop after two consecutive failures: 16 and 32 fail for frame 10, so 64
   // is never tried; frames in a stretch with all 16-steps failing try 16 and 32 only.
-  EXPECT_TRUE(run.tried(10, 26));
-  EXPECT_TRUE(run.tried(10, 42));
-  EXPECT_FALSE(run.tried(10, 74));
+  EXPECT_TRUE(run.tried.Contains(10, 26));
+  EXPECT_TRUE(run.tried.Contains(10, 42));
+  EXPECT_FALSE(run.tried.Contains(10, 74));
   EXPECT_LE(run.report.num_quadratic_tried, 2u * 100u);
 }
 
@@ -91,9 +92,9 @@ TEST(SequentialWaves, FullWindowWhenEverythingVerifies) {
   window.initial_overlap = 4;
   const WavesRun run = RunWaves(80, truth, options, window);
   // Every frame: 1..4 and the powers of two beyond: 8, 16, 32, 64.
-  for (int d : {1, 2, 3, 4, 8, 16, 32, 64}) EXPECT_TRUE(run.tried(0, d)) << d;
-  EXPECT_FALSE(run.tried(0, 5));
-  EXPECT_FALSE(run.tried(0, 6));
+  for (int d : {1, 2, 3, 4, 8, 16, 32, 64}) EXPECT_TRUE(run.tried.Contains(0, d)) << d;
+  EXPECT_FALSE(run.tried.Contains(0, 5));
+  EXPECT_FALSE(run.tried.Contains(0, 6));
   size_t expected = 0;
   for (int i = 0; i < 80; ++i) {
     for (int d : {1, 2, 3, 4, 8, 16, 32, 64}) expected += i + d < 80;
@@ -106,8 +107,8 @@ TEST(SequentialWaves, PairsTriedBeforeAreNotTriedAgain) {
   const int n = 20;
   std::vector<image_t> ids(n);
   for (int i = 0; i < n; ++i) ids[i] = i + 1;
-  BoolMatrix tried = BoolMatrix::Constant(n, n, false), verified = tried;
-  tried(0, 1) = tried(1, 0) = true;  // tried before and failed
+  IndexPairSet tried(n), verified(n);
+  tried.Insert(0, 1);  // tried before and failed
   size_t calls = 0;
   auto verify = [&](const std::vector<ImagePair>& pairs) {
     for (const ImagePair& p : pairs) EXPECT_FALSE(p.image_id1 == 1 && p.image_id2 == 2);
@@ -116,8 +117,8 @@ TEST(SequentialWaves, PairsTriedBeforeAreNotTriedAgain) {
   };
   const auto report = RunSequentialWaves(ids, {}, {}, verify, &tried, &verified);
   EXPECT_EQ(report.num_tried, calls);
-  EXPECT_FALSE(verified(0, 1));
-  EXPECT_TRUE(verified(0, 2));
+  EXPECT_FALSE(verified.Contains(0, 1));
+  EXPECT_TRUE(verified.Contains(0, 2));
 }
 
 TEST(SequentialWaves, RejectsBadOptions) {

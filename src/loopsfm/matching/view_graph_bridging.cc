@@ -34,41 +34,42 @@ std::vector<int> GapDistances(int max_distance) {
 
 namespace {
 
-using BoolMatrix = Eigen::Matrix<bool, Eigen::Dynamic, Eigen::Dynamic>;
-
 struct Proposals {
-  explicit Proposals(const BoolMatrix& tried)
-      : tried_(tried), proposed_(BoolMatrix::Constant(tried.rows(), tried.cols(), false)) {}
+  explicit Proposals(const IndexPairSet& tried) : tried_(tried), proposed_(tried.NumFrames()) {}
   void Add(int i, int j) {
-    const int n = static_cast<int>(tried_.rows());
+    const int n = tried_.NumFrames();
     if (i == j || i < 0 || j < 0 || i >= n || j >= n) return;
     if (i > j) std::swap(i, j);
-    if (tried_(i, j) || proposed_(i, j)) return;
-    proposed_(i, j) = true;
+    if (tried_.Contains(i, j) || proposed_.Contains(i, j)) return;
+    proposed_.Insert(i, j);
     pairs.push_back({i, j});
   }
   std::vector<std::pair<int, int>> pairs;
 
  private:
-  const BoolMatrix& tried_;
-  BoolMatrix proposed_;
+  const IndexPairSet& tried_;
+  IndexPairSet proposed_;
 };
+
+GraphComponents ComponentsOf(const IndexPairSet& verified) {
+  return ConnectedComponents(verified.NumFrames(), verified.SortedPairs());
+}
 
 }  // namespace
 
-ViewGraphBridgingReport BridgeViewGraph(const Eigen::MatrixXf& scores,
+ViewGraphBridgingReport BridgeViewGraph(const std::vector<std::vector<ScoredIndex>>& candidates,
                                         const std::vector<image_t>& ordered_ids,
                                         const ViewGraphBridgingOptions& options,
-                                        const VerifyPairsFn& verify, BoolMatrix* tried,
-                                        BoolMatrix* verified) {
+                                        const VerifyPairsFn& verify, IndexPairSet* tried,
+                                        IndexPairSet* verified) {
   options.Check();
   const int n = static_cast<int>(ordered_ids.size());
-  LOOPSFM_CHECK(tried->rows() == n && verified->rows() == n);
-  LOOPSFM_CHECK(scores.size() == 0 || (scores.rows() == n && scores.cols() == n));
+  LOOPSFM_CHECK(tried->NumFrames() == n && verified->NumFrames() == n);
+  LOOPSFM_CHECK(candidates.empty() || static_cast<int>(candidates.size()) == n);
   const std::vector<int> distances = GapDistances(options.max_gap_frames);
 
   ViewGraphBridgingReport report;
-  GraphComponents components = ConnectedComponents(*verified);
+  GraphComponents components = ComponentsOf(*verified);
   report.num_components_before = components.NumComponents();
   report.largest_component_before = components.LargestSize();
   std::vector<std::pair<int, int>> last_verified;
@@ -100,27 +101,27 @@ ViewGraphBridgingReport BridgeViewGraph(const Eigen::MatrixXf& scores,
       }
     }
     // Weak frames' own best candidates, other components first.
-    if (scores.size() > 0 && options.num_candidates_per_frame > 0) {
+    if (!candidates.empty() && options.num_candidates_per_frame > 0) {
       for (int i = 0; i < n; ++i) {
-        const int partners = static_cast<int>(verified->row(i).count());
+        const int partners = static_cast<int>(verified->Partners(i).size());
         if (components.label[i] == 0 && partners >= options.min_num_partners) continue;
         if (fruitless[i] >= options.max_fruitless_rounds) continue;
-        std::vector<std::pair<float, int>> candidates;
-        for (int j = 0; j < n; ++j) {
-          if (j == i || (*tried)(i, j)) continue;
-          const bool other = components.label[j] != components.label[i];
+        std::vector<std::pair<float, int>> ranked;
+        for (const ScoredIndex& c : candidates[i]) {
+          if (c.index == i || tried->Contains(i, c.index)) continue;
+          const bool other = components.label[c.index] != components.label[i];
           // Candidates in other components rank above those in the frame's own.
-          candidates.push_back({std::max(scores(i, j), scores(j, i)) + (other ? 2.0f : 0.0f), j});
+          ranked.push_back({c.score + (other ? 2.0f : 0.0f), c.index});
         }
-        const size_t k = std::min<size_t>(candidates.size(), options.num_candidates_per_frame);
-        std::partial_sort(candidates.begin(), candidates.begin() + k, candidates.end(),
+        const size_t k = std::min<size_t>(ranked.size(), options.num_candidates_per_frame);
+        std::partial_sort(ranked.begin(), ranked.begin() + k, ranked.end(),
                           [](const auto& a, const auto& b) {
                             return a.first != b.first ? a.first > b.first : a.second < b.second;
                           });
         candidates_of[i].clear();
         for (size_t c = 0; c < k; ++c) {
-          proposals.Add(i, candidates[c].second);
-          candidates_of[i].push_back(candidates[c].second);
+          proposals.Add(i, ranked[c].second);
+          candidates_of[i].push_back(ranked[c].second);
         }
       }
     }
@@ -135,23 +136,23 @@ ViewGraphBridgingReport BridgeViewGraph(const Eigen::MatrixXf& scores,
     last_verified.clear();
     for (size_t m = 0; m < pairs.size(); ++m) {
       const auto [i, j] = proposals.pairs[m];
-      (*tried)(i, j) = (*tried)(j, i) = true;
+      tried->Insert(i, j);
       if (!ok[m]) continue;
-      (*verified)(i, j) = (*verified)(j, i) = true;
+      verified->Insert(i, j);
       last_verified.push_back({i, j});
     }
     report.num_verified += last_verified.size();
     for (int i = 0; i < n; ++i) {
       if (candidates_of[i].empty()) continue;
       const bool any = std::any_of(candidates_of[i].begin(), candidates_of[i].end(),
-                                   [&](int j) { return (*verified)(i, j); });
+                                   [&](int j) { return verified->Contains(i, j); });
       fruitless[i] = any ? 0 : fruitless[i] + 1;
       candidates_of[i].clear();
     }
     if (last_verified.empty()) break;
-    components = ConnectedComponents(*verified);
+    components = ComponentsOf(*verified);
   }
-  components = ConnectedComponents(*verified);
+  components = ComponentsOf(*verified);
   report.num_components_after = components.NumComponents();
   report.largest_component_after = components.LargestSize();
   return report;

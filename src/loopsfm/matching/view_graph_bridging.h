@@ -8,17 +8,17 @@
 //    the frames within gap_reach of that boundary are tried with frames on the other side
 //    at growing distances (2, 3, 4, 6, 8, 12, 16, 24, ... up to max_gap_frames);
 //  - the frame's own best similarity candidates (not the global top-k of the guided rounds,
-//    which a strong loop elsewhere in the video can fill), until they fail in
-//    max_fruitless_rounds rounds;
+//    which a strong loop elsewhere in the video can fill), those in other components first,
+//    until they fail in max_fruitless_rounds rounds (the candidates are the frame's best few
+//    dozen by score, not every frame: memory stays linear in the frames);
 //  - the four neighbours in the match matrix of every bridge verified in the round before,
 //    so that a bridge found by one pair gets the several pairs a mapper needs to cross it.
 // Rounds end when a round verifies nothing new or nothing is left to propose.
 
 #include <vector>
 
-#include <Eigen/Core>
-
 #include "loopsfm/matching/guided_pairing.h"
+#include "loopsfm/matching/pair_set.h"
 
 namespace loopsfm {
 
@@ -53,14 +53,14 @@ struct ViewGraphBridgingReport {
 // 1.5 times powers of two) up to max_distance.
 std::vector<int> GapDistances(int max_distance);
 
-// `scores` is the n x n similarity matrix of `ordered_ids` (capture order), or empty when
-// there is none (then only gap and growing proposals are made). `tried` and `verified` as
-// for RunGuidedPairing; both are updated.
-ViewGraphBridgingReport BridgeViewGraph(const Eigen::MatrixXf& scores,
+// `candidates[i]` are frame i's best-scoring frames (ImageDatabase::Candidates, `best`),
+// indices into `ordered_ids` (capture order), or empty when there are none (then only gap and
+// growing proposals are made). `tried` and `verified` as for RunGuidedPairing; both are
+// updated.
+ViewGraphBridgingReport BridgeViewGraph(const std::vector<std::vector<ScoredIndex>>& candidates,
                                         const std::vector<image_t>& ordered_ids,
                                         const ViewGraphBridgingOptions& options,
-                                        const VerifyPairsFn& verify,
-                                        Eigen::Matrix<bool, Eigen::Dynamic, Eigen::Dynamic>* tried,
-                                        Eigen::Matrix<bool, Eigen::Dynamic, Eigen::Dynamic>* verified);
+                                        const VerifyPairsFn& verify, IndexPairSet* tried,
+                                        IndexPairSet* verified);
 
 }  // namespace loopsfm

@@ -5,43 +5,46 @@
 #include <functional>
 
 #include "loopsfm/math/graph.h"
+#include "loopsfm/matching/pairing_test_util.h"
 
 namespace loopsfm {
 namespace {
-
-using BoolMatrix = Eigen::Matrix<bool, Eigen::Dynamic, Eigen::Dynamic>;
 
 struct BridgeCase {
   int n;
   std::function<bool(int, int)> truth;  // i < j
   std::vector<image_t> ids;
-  BoolMatrix tried, verified;
+  IndexPairSet tried, verified;
   size_t calls = 0;
 
   BridgeCase(int n_, std::function<bool(int, int)> t) : n(n_), truth(std::move(t)) {
     for (int i = 0; i < n; ++i) ids.push_back(i + 1);
-    tried = verified = BoolMatrix::Constant(n, n, false);
+    tried = verified = IndexPairSet(n);
     // Sequential pairs up to 3 apart were tried before.
     for (int i = 0; i < n; ++i) {
       for (int j = i + 1; j < n && j <= i + 3; ++j) {
-        tried(i, j) = tried(j, i) = true;
-        verified(i, j) = verified(j, i) = truth(i, j);
+        tried.Insert(i, j);
+        if (truth(i, j)) verified.Insert(i, j);
       }
     }
   }
+  int NumComponents() const { return ConnectedComponents(n, verified.SortedPairs()).NumComponents(); }
+  // `scores`: a dense test similarity (empty: none), given as each frame's best 32 candidates.
   ViewGraphBridgingReport Bridge(const Eigen::MatrixXf& scores,
                                  const ViewGraphBridgingOptions& options = {}) {
     auto verify = [&](const std::vector<ImagePair>& pairs) {
       std::vector<bool> ok;
       for (const ImagePair& p : pairs) {
         const int i = static_cast<int>(p.image_id1) - 1, j = static_cast<int>(p.image_id2) - 1;
-        EXPECT_FALSE(tried(i, j)) << "tried twice: " << i << ", " << j;
+        EXPECT_FALSE(tried.Contains(i, j)) << "tried twice: " << i << ", " << j;
         ok.push_back(truth(std::min(i, j), std::max(i, j)));
       }
       calls += pairs.size();
       return ok;
     };
-    return BridgeViewGraph(scores, ids, options, verify, &tried, &verified);
+    const std::vector<std::vector<ScoredIndex>> candidates =
+        scores.size() > 0 ? CandidatesFromMatrix(scores, 32) : std::vector<std::vector<ScoredIndex>>{};
+    return BridgeViewGraph(candidates, ids, options, verify, &tried, &verified);
   }
 };
 
@@ -56,7 +59,7 @@ TEST(ViewGraphBridging, BridgesAGapInTimeWithSeveralPairs) {
     if ((i < 50) == (j < 50)) return j - i <= 3;
     return i >= 45 && j - i >= 20 && j - i <= 24;
   });
-  ASSERT_EQ(ConnectedComponents(s.verified).NumComponents(), 2);
+  ASSERT_EQ(s.NumComponents(), 2);
   const auto report = s.Bridge(Eigen::MatrixXf());
   EXPECT_EQ(report.num_components_before, 2);
   EXPECT_EQ(report.largest_component_before, 50);
@@ -65,7 +68,7 @@ TEST(ViewGraphBridging, BridgesAGapInTimeWithSeveralPairs) {
   // Growing around the first bridges found every bridge pair (5 x 5 block of 25).
   int bridges = 0;
   for (int i = 45; i < 50; ++i) {
-    for (int j = 65; j < 74; ++j) bridges += s.verified(i, j);
+    for (int j = 65; j < 74; ++j) bridges += s.verified.Contains(i, j);
   }
   EXPECT_EQ(bridges, 25);
   EXPECT_EQ(report.num_tried, s.calls);
@@ -84,7 +87,7 @@ TEST(ViewGraphBridging, WeakFrameGetsItsOwnBestCandidates) {
   scores.block(0, 90, 10, 10).setConstant(0.9f);
   scores(10, 70) = scores(70, 10) = 0.5f;
   const auto report = s.Bridge(scores);
-  EXPECT_TRUE(s.verified(10, 70));
+  EXPECT_TRUE(s.verified.Contains(10, 70));
   EXPECT_EQ(report.num_components_after, 1);
 }
 

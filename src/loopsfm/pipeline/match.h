@@ -63,7 +63,8 @@ struct MatchOptions {
   // the prefilter must find for the pair to be fully matched.
   int lowres_num_features = 300;
   int lowres_min_matches = 12;
-  // Vocabtree: write the similarity and match matrices as PNG next to the database.
+  // Vocabtree: write the similarity (the partners pairing kept of it) and match matrices as PNG
+  // next to the database (frames binned beyond 1,200 a side).
   bool write_matrix_images = true;
   // Vocabtree: also write the similarity matrix as text here (empty: not written).
   std::filesystem::path similarity_path;

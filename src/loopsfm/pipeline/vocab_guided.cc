@@ -1,5 +1,6 @@
 // The vocabtree pairing strategy: sequential neighbours first, then rounds of pairs proposed
-// by the vocabulary tree's similarity matrix and grown around verified pairs.
+// by the vocabulary tree's similarity candidates and grown around verified pairs. Nothing here
+// is n x n: pairs are sparse sets, the similarity a few dozen partners per frame.
 
 #include <filesystem>
 #include <fstream>
@@ -8,6 +9,7 @@
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 
+#include "loopsfm/matching/pair_set.h"
 #include "loopsfm/pipeline/match.h"
 #include "loopsfm/pipeline/vocab_build.h"
 #include "loopsfm/retrieval/image_database.h"
@@ -18,7 +20,14 @@
 namespace loopsfm {
 namespace {
 
-using BoolMatrix = Eigen::Matrix<bool, Eigen::Dynamic, Eigen::Dynamic>;
+// Partners kept per frame from the similarity (ImageDatabase::Candidates): its best frames
+// overall, for bridging weak frames, and its best beyond the sequential window, for the loop
+// proposals. The first round proposes about one pair per frame and later rounds fewer, so a
+// few dozen per frame hold every pair the rounds reach for; memory stays linear in the frames.
+constexpr int kBestCandidates = 32;
+constexpr int kLoopCandidates = 32;
+// The matrix pictures have at most this many cells a side (frames are binned beyond that).
+constexpr int kMaxPictureCells = 1200;
 
 // Trains a tree on a bounded sample: an equal share of random descriptors of every frame,
 // read one frame at a time.
@@ -43,33 +52,53 @@ VocabularyTree TrainSceneTree(const Database& database, const std::vector<image_
   return VocabularyTree::Train(std::move(training), options, random);
 }
 
-// A colour-mapped picture of a matrix, normalised to its largest value.
-void WriteMatrixPng(const Eigen::MatrixXf& matrix, const std::filesystem::path& path) {
-  if (matrix.size() == 0) return;
-  const float max = std::max(matrix.maxCoeff(), 1e-12f);
-  cv::Mat grey(static_cast<int>(matrix.rows()), static_cast<int>(matrix.cols()), CV_8U);
-  for (int i = 0; i < grey.rows; ++i) {
-    for (int j = 0; j < grey.cols; ++j) {
-      grey.at<uint8_t>(i, j) = static_cast<uint8_t>(std::clamp(255.0f * matrix(i, j) / max, 0.0f, 255.0f));
-    }
+// A picture of an n x n frame matrix from sparse entries: frames binned into at most
+// kMaxPictureCells cells a side, each cell the largest value put in it.
+class MatrixPicture {
+ public:
+  explicit MatrixPicture(int n)
+      : n_(n), cells_(std::min(n, kMaxPictureCells)),
+        values_(static_cast<size_t>(cells_) * cells_, 0.0f) {}
+  void Put(int i, int j, float value) {
+    float& cell = values_[static_cast<size_t>(Cell(i)) * cells_ + Cell(j)];
+    cell = std::max(cell, value);
   }
-  const int scale = std::max(1, 600 / std::max(1, grey.rows));
-  cv::resize(grey, grey, cv::Size(), scale, scale, cv::INTER_NEAREST);
-  cv::Mat colour;
-  cv::applyColorMap(grey, colour, cv::COLORMAP_VIRIDIS);
-  if (!cv::imwrite(path.string(), colour)) spdlog::warn("could not write {}", path.string());
-}
+  // Colour-mapped, normalised to the largest value.
+  void Write(const std::filesystem::path& path) const {
+    if (cells_ == 0) return;
+    const float max = std::max(*std::max_element(values_.begin(), values_.end()), 1e-12f);
+    cv::Mat grey(cells_, cells_, CV_8U);
+    for (int i = 0; i < cells_; ++i) {
+      for (int j = 0; j < cells_; ++j) {
+        grey.at<uint8_t>(i, j) = static_cast<uint8_t>(
+            std::clamp(255.0f * values_[static_cast<size_t>(i) * cells_ + j] / max, 0.0f, 255.0f));
+      }
+    }
+    const int scale = std::max(1, 600 / cells_);
+    cv::resize(grey, grey, cv::Size(), scale, scale, cv::INTER_NEAREST);
+    cv::Mat colour;
+    cv::applyColorMap(grey, colour, cv::COLORMAP_VIRIDIS);
+    if (!cv::imwrite(path.string(), colour)) spdlog::warn("could not write {}", path.string());
+  }
 
-// The similarity matrix as text: a line of frame names, then one row of scores per frame.
-void WriteSimilarityText(const Eigen::MatrixXf& scores, const std::vector<Frame>& frames,
+ private:
+  int Cell(int i) const { return static_cast<int>(static_cast<int64_t>(i) * cells_ / n_); }
+  int n_, cells_;
+  std::vector<float> values_;
+};
+
+// The similarity matrix as text: a line of frame names, then one row of scores per frame,
+// streamed row by row.
+void WriteSimilarityText(const ImageDatabase& images, const std::vector<Frame>& frames,
                          const std::filesystem::path& path) {
   std::ofstream out(path);
   for (size_t i = 0; i < frames.size(); ++i) out << (i ? " " : "") << frames[i].name;
   out << "\n";
-  for (Eigen::Index i = 0; i < scores.rows(); ++i) {
-    for (Eigen::Index j = 0; j < scores.cols(); ++j) out << (j ? " " : "") << scores(i, j);
+  const int n = images.NumImages();
+  images.ForEachSimilarityRow([&](int, const float* row) {
+    for (int j = 0; j < n; ++j) out << (j ? " " : "") << row[j];
     out << "\n";
-  }
+  });
   if (!out) throw StorageError(fmt::format("cannot write the similarity matrix to '{}'", path.string()));
 }
 
@@ -80,7 +109,7 @@ void MatchVocabTreeGuided(Database& database, const std::vector<image_t>& ordere
   const int n = static_cast<int>(ordered_ids.size());
   std::unordered_map<image_t, int> index_of;
   for (int i = 0; i < n; ++i) index_of[ordered_ids[i]] = i;
-  BoolMatrix tried = BoolMatrix::Constant(n, n, false), verified = tried, sequential = tried;
+  IndexPairSet tried(n), verified(n), sequential(n);
   Timer timer;
   if (options.vocab_include_sequential) {
     auto verify = [&](const std::vector<ImagePair>& pairs) { return matcher.Match(pairs, report); };
@@ -120,10 +149,15 @@ void MatchVocabTreeGuided(Database& database, const std::vector<image_t>& ordere
     for (size_t i = begin; i < end; ++i) images.AddImage(ordered_ids[i], words[i - begin]);
   }
   images.Finalize();
-  const Eigen::MatrixXf scores = images.SimilarityMatrix();
+  GuidedPairingOptions guided = options.guided;
+  // Score proposals leave the sequential window to the sequential part; pairs the waves
+  // covered do not count as loop partners.
+  if (options.vocab_include_sequential) guided.min_frame_gap = std::max(guided.min_frame_gap, options.sequential.overlap);
+  const SimilarityCandidates candidates =
+      images.Candidates(kBestCandidates, kLoopCandidates, guided.min_frame_gap);
   report->vocab.score_seconds = timer.ElapsedSeconds();
   if (!options.similarity_path.empty()) {
-    WriteSimilarityText(scores, FramesInCaptureOrder(database), options.similarity_path);
+    WriteSimilarityText(images, FramesInCaptureOrder(database), options.similarity_path);
   }
   spdlog::info("vocabtree: {} words, {:.1f} s tree, {:.1f} s scoring", tree.NumWords(),
                report->vocab.build_seconds, report->vocab.score_seconds);
@@ -136,12 +170,8 @@ void MatchVocabTreeGuided(Database& database, const std::vector<image_t>& ordere
     match_seconds += match_timer.ElapsedSeconds();
     return ok;
   };
-  GuidedPairingOptions guided = options.guided;
-  // Score proposals leave the sequential window to the sequential part; pairs the waves
-  // covered do not count as loop partners.
-  if (options.vocab_include_sequential) guided.min_frame_gap = std::max(guided.min_frame_gap, options.sequential.overlap);
-  report->vocab.guided =
-      RunGuidedPairing(scores, ordered_ids, guided, verify, &tried, &verified, &sequential);
+  report->vocab.guided = RunGuidedPairing(candidates.far, ordered_ids, guided, verify, &tried,
+                                          &verified, &sequential);
   report->vocab.match_seconds += match_seconds;
   report->vocab.propose_seconds = rounds_timer.ElapsedSeconds() - match_seconds;
   for (size_t r = 0; r < report->vocab.guided.rounds.size(); ++r) {
@@ -153,7 +183,7 @@ void MatchVocabTreeGuided(Database& database, const std::vector<image_t>& ordere
   if (options.vocab_bridging) {
     Timer bridging_timer;
     const double match_before = match_seconds;
-    report->vocab.bridging = BridgeViewGraph(scores, ordered_ids, options.bridging, verify, &tried, &verified);
+    report->vocab.bridging = BridgeViewGraph(candidates.best, ordered_ids, options.bridging, verify, &tried, &verified);
     report->vocab.match_seconds += match_seconds - match_before;
     report->vocab.propose_seconds += bridging_timer.ElapsedSeconds() - (match_seconds - match_before);
     const auto& b = report->vocab.bridging;
@@ -165,16 +195,25 @@ void MatchVocabTreeGuided(Database& database, const std::vector<image_t>& ordere
 
   if (options.write_matrix_images) {
     const std::filesystem::path db_path(database.Path());
-    Eigen::MatrixXf similarity = scores;
-    similarity.diagonal().setZero();
-    WriteMatrixPng(similarity, db_path.parent_path() / (db_path.stem().string() + "_similarity.png"));
-    Eigen::MatrixXf inliers = Eigen::MatrixXf::Zero(n, n);
+    // The similarity as far as pairing kept it: each frame's best and best distant partners.
+    MatrixPicture similarity(n);
+    for (int i = 0; i < n; ++i) {
+      for (const auto* list : {&candidates.best[i], &candidates.far[i]}) {
+        for (const ScoredIndex& c : *list) {
+          similarity.Put(i, c.index, c.score);
+          similarity.Put(c.index, i, c.score);
+        }
+      }
+    }
+    similarity.Write(db_path.parent_path() / (db_path.stem().string() + "_similarity.png"));
+    MatrixPicture inliers(n);
     for (const VerifiedPair& pair : database.ReadVerifiedPairs()) {
       if (!index_of.count(pair.pair.image_id1) || !index_of.count(pair.pair.image_id2)) continue;
       const int i = index_of.at(pair.pair.image_id1), j = index_of.at(pair.pair.image_id2);
-      inliers(i, j) = inliers(j, i) = static_cast<float>(pair.num_inliers);
+      inliers.Put(i, j, static_cast<float>(pair.num_inliers));
+      inliers.Put(j, i, static_cast<float>(pair.num_inliers));
     }
-    WriteMatrixPng(inliers, db_path.parent_path() / (db_path.stem().string() + "_matches.png"));
+    inliers.Write(db_path.parent_path() / (db_path.stem().string() + "_matches.png"));
   }
 }
 

@@ -27,6 +27,9 @@ constexpr size_t kMaxDenseBytes = size_t{512} << 20;
 constexpr int64_t kDenseRowBlock = 64;
 // QueryAll ranks the columns of SimilarityMatrix() up to this many images.
 constexpr int kMaxImagesForMatrixQueryAll = 8192;
+// Images per task of Candidates() and ForEachSimilarityRow(): each task reuses one row of n
+// scores across its images, and ForEachSimilarityRow() holds one block of rows.
+constexpr int kQueryRowBlock = 64;
 
 using RowMajorMatrixXf = Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
 
@@ -123,6 +126,26 @@ inline float Term(float a, float b) {
   } else {
     return std::min(a, b);
   }
+}
+
+// Keeps the best `count` of `candidates` (indices into scores), sorted best first: score
+// descending, then index ascending, so the order does not depend on how candidates was filled.
+void KeepBest(const float* scores, size_t count, std::vector<uint32_t>& candidates) {
+  const auto better = [&](uint32_t a, uint32_t b) {
+    return scores[a] > scores[b] || (scores[a] == scores[b] && a < b);
+  };
+  count = std::min(count, candidates.size());
+  std::partial_sort(candidates.begin(), candidates.begin() + count, candidates.end(), better);
+  candidates.resize(count);
+}
+
+std::vector<ScoredIndex> ToScoredIndices(const float* scores,
+                                         const std::vector<uint32_t>& indices) {
+  std::vector<ScoredIndex> out(indices.size());
+  for (size_t k = 0; k < indices.size(); ++k) {
+    out[k] = {static_cast<int>(indices[k]), scores[indices[k]]};
+  }
+  return out;
 }
 
 }  // namespace
@@ -257,14 +280,12 @@ std::vector<ImageScore> ImageDatabase::Rank(const float* scores, uint32_t exclud
   for (uint32_t i = 0; i < image_ids_.size(); ++i) {
     if (scores[i] > 0 && i != exclude) candidates.push_back(i);
   }
-  const auto better = [&](uint32_t a, uint32_t b) {
-    return scores[a] > scores[b] || (scores[a] == scores[b] && a < b);
-  };
-  const size_t count =
-      max_results > 0 ? std::min<size_t>(max_results, candidates.size()) : candidates.size();
-  std::partial_sort(candidates.begin(), candidates.begin() + count, candidates.end(), better);
-  std::vector<ImageScore> ranked(count);
-  for (size_t i = 0; i < count; ++i) ranked[i] = {image_ids_[candidates[i]], scores[candidates[i]]};
+  KeepBest(scores, max_results > 0 ? static_cast<size_t>(max_results) : candidates.size(),
+           candidates);
+  std::vector<ImageScore> ranked(candidates.size());
+  for (size_t i = 0; i < candidates.size(); ++i) {
+    ranked[i] = {image_ids_[candidates[i]], scores[candidates[i]]};
+  }
   return ranked;
 }
 
@@ -306,6 +327,55 @@ std::vector<std::vector<ImageScore>> ImageDatabase::QueryAll(int max_results) co
     results[i] = Rank(scores.data(), static_cast<uint32_t>(i), max_results);
   });
   return results;
+}
+
+SimilarityCandidates ImageDatabase::Candidates(int num_best, int num_far, int min_index_gap) const {
+  LOOPSFM_CHECK_MSG(finalized_, "ImageDatabase::Candidates before Finalize");
+  LOOPSFM_CHECK_GE(num_best, 0);
+  LOOPSFM_CHECK_GE(num_far, 0);
+  LOOPSFM_CHECK_GE(min_index_gap, 0);
+  const int64_t n = NumImages();
+  SimilarityCandidates candidates;
+  candidates.best.resize(n);
+  candidates.far.resize(n);
+  const int64_t num_blocks = (n + kQueryRowBlock - 1) / kQueryRowBlock;
+  tbb::parallel_for(int64_t{0}, num_blocks, [&](int64_t block) {
+    std::vector<float> scores(n, 0.0f);
+    std::vector<uint32_t> best, far;
+    const int64_t end = std::min(n, (block + 1) * kQueryRowBlock);
+    for (int64_t i = block * kQueryRowBlock; i < end; ++i) {
+      Score(ImageVectorAt(static_cast<uint32_t>(i)), scores.data());
+      best.clear();
+      far.clear();
+      for (int64_t j = 0; j < n; ++j) {
+        if (scores[j] <= 0 || j == i) continue;
+        best.push_back(static_cast<uint32_t>(j));
+        if (std::abs(i - j) > min_index_gap) far.push_back(static_cast<uint32_t>(j));
+      }
+      KeepBest(scores.data(), num_best, best);
+      KeepBest(scores.data(), num_far, far);
+      candidates.best[i] = ToScoredIndices(scores.data(), best);
+      candidates.far[i] = ToScoredIndices(scores.data(), far);
+      std::fill(scores.begin(), scores.end(), 0.0f);
+    }
+  });
+  return candidates;
+}
+
+void ImageDatabase::ForEachSimilarityRow(
+    const std::function<void(int row, const float* scores)>& visit) const {
+  LOOPSFM_CHECK_MSG(finalized_, "ImageDatabase::ForEachSimilarityRow before Finalize");
+  const int64_t n = NumImages();
+  std::vector<float> rows(static_cast<size_t>(std::min<int64_t>(n, kQueryRowBlock) * n));
+  for (int64_t begin = 0; begin < n; begin += kQueryRowBlock) {
+    const int64_t end = std::min(n, begin + kQueryRowBlock);
+    std::fill(rows.begin(), rows.begin() + (end - begin) * n, 0.0f);
+    // The self-score comes out of Score too: the image is in the list of each of its words.
+    tbb::parallel_for(begin, end, [&](int64_t i) {
+      Score(ImageVectorAt(static_cast<uint32_t>(i)), rows.data() + (i - begin) * n);
+    });
+    for (int64_t i = begin; i < end; ++i) visit(static_cast<int>(i), rows.data() + (i - begin) * n);
+  }
 }
 
 Eigen::MatrixXf ImageDatabase::SimilarityMatrix() const {

@@ -17,9 +17,12 @@
 //   for (...) database.AddImage(image_id, tree.QuantizeAll(descriptors));
 //   database.Finalize();
 //   Eigen::MatrixXf similarity = database.SimilarityMatrix();
-// or BuildImageDatabase() below, which quantises all images in one grouped descent.
+// or BuildImageDatabase() below, which quantises all images in one grouped descent. For many
+// images, Candidates() and ForEachSimilarityRow() give what pair selection and pictures need in
+// memory linear in the number of images.
 
 #include <cstdint>
+#include <functional>
 #include <unordered_map>
 #include <utility>
 #include <vector>
@@ -47,6 +50,24 @@ struct ImageScore {
   image_t image_id = kInvalidImageId;
   float score = 0;
   friend bool operator==(const ImageScore&, const ImageScore&) = default;
+};
+
+// One image's partner: an index into ImageIds() and its score.
+struct ScoredIndex {
+  int index = -1;
+  float score = 0;
+  friend bool operator==(const ScoredIndex&, const ScoredIndex&) = default;
+};
+
+// Each image's best-scoring partners, best first (ties: lower index first), only partners with
+// a positive score. Indexed like ImageIds().
+struct SimilarityCandidates {
+  // Per image: its best partners among all other images.
+  std::vector<std::vector<ScoredIndex>> best;
+  // Per image: its best partners among the images more than min_index_gap indices away
+  // (|i - j| > min_index_gap). Indices are capture order, so these are loop candidates, not
+  // temporal neighbours, which would otherwise crowd them out of `best`.
+  std::vector<std::vector<ScoredIndex>> far;
 };
 
 class ImageDatabase {
@@ -88,8 +109,21 @@ class ImageDatabase {
   // images go through a dense product (a GEMM for kL2), the others through the inverted file,
   // each pair once. Entries equal Query's scores up to float rounding (relative 1e-6); the
   // result does not depend on the thread count. Memory is 4 n^2 bytes, plus up to 512 MiB
-  // for the dense part: for many thousands of images prefer Query per image.
+  // for the dense part: for many thousands of images use Candidates() to select pairs and
+  // ForEachSimilarityRow() to draw or write the scores.
   Eigen::MatrixXf SimilarityMatrix() const;
+  // Every image's num_best best partners and its num_far best partners more than
+  // min_index_gap indices away (see SimilarityCandidates), each image queried through the
+  // inverted file in parallel. Scores are Query's: each pair's shared words are summed in word
+  // order from either side, so (i, j) and (j, i) score the same, and SimilarityMatrix() may
+  // differ from them in the last bits. Memory is linear in the number of images (one row of
+  // scores per thread, plus the lists); the result does not depend on the thread count.
+  SimilarityCandidates Candidates(int num_best, int num_far, int min_index_gap) const;
+  // Calls visit(row, scores) for row = 0 .. n - 1 in order, from the calling thread, with
+  // scores[0 .. n) the row's scores as in Candidates() and the image's score with itself at
+  // scores[row] (the diagonal of SimilarityMatrix()). scores is valid during the call only.
+  // Blocks of rows are computed in parallel; at most one block is held.
+  void ForEachSimilarityRow(const std::function<void(int row, const float* scores)>& visit) const;
 
  private:
   struct SparseVector {

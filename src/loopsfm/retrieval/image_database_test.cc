@@ -1,10 +1,13 @@
 #include "loopsfm/retrieval/image_database.h"
 
+#include <algorithm>
 #include <cmath>
+#include <functional>
 #include <set>
 
 #include <gtest/gtest.h>
 #include <tbb/global_control.h>
+#include <tbb/task_arena.h>
 
 #include "loopsfm/retrieval/retrieval_test_data.h"
 #include "loopsfm/util/errors.h"
@@ -167,14 +170,15 @@ TEST_P(ImageDatabaseNormTest, RetrievesNeighboursOnAPath) {
   EXPECT_NEAR(outside[0].score, 1.0f, 1e-5f);
 }
 
-TEST_P(ImageDatabaseNormTest, SimilarityMatrixMatchesBruteForce) {
-  // 150 images over 400 words with P(word w) ~ 1 / (w + 3): the frequent words are in most
-  // images (the dense product), the rare ones in a few (the inverted file).
+// 150 images (ids 0 .. 149) over 400 words with P(word w) ~ 1 / (w + 3): the frequent words
+// are in most images (the dense product of SimilarityMatrix()), the rare ones in a few (the
+// inverted file). Some images get no words.
+ImageDatabase ZipfDatabase(TfIdfNorm norm) {
   Random random(13);
   std::vector<double> cdf;
   double total = 0;
   for (int w = 0; w < 400; ++w) cdf.push_back(total += 1.0 / (w + 3));
-  ImageDatabase database(400, WithNorm(GetParam()));
+  ImageDatabase database(400, WithNorm(norm));
   for (image_t i = 0; i < 150; ++i) {
     std::vector<uint32_t> words(random.UniformInt(0, 60));
     for (auto& w : words) {
@@ -183,6 +187,11 @@ TEST_P(ImageDatabaseNormTest, SimilarityMatrixMatchesBruteForce) {
     database.AddImage(i, words);
   }
   database.Finalize();
+  return database;
+}
+
+TEST_P(ImageDatabaseNormTest, SimilarityMatrixMatchesBruteForce) {
+  const ImageDatabase database = ZipfDatabase(GetParam());
   const Eigen::MatrixXf similarity = database.SimilarityMatrix();
   int dense_words = 0;
   for (uint32_t w = 0; w < 400; ++w) {
@@ -214,6 +223,122 @@ TEST_P(ImageDatabaseNormTest, SimilarityMatrixMatchesBruteForce) {
   }
 }
 
+// Relative agreement of a streamed or ranked score with SimilarityMatrix(), whose sums may
+// round differently; every term is positive, so the relative error stays near float epsilon.
+constexpr float kRelativeTolerance = 1e-5f;
+
+bool NearRelative(float a, float b) {
+  return std::abs(a - b) <= kRelativeTolerance * std::max(std::abs(a), std::abs(b));
+}
+
+// Checks a candidate list of image `i` against its row of the similarity matrix: the best
+// `count` of the positive-scoring images `eligible` (row i of the matrix in index order),
+// with near ties at the cut and in the order allowed to go either way.
+void ExpectTopOfRow(const std::vector<ScoredIndex>& listed, const Eigen::MatrixXf& similarity,
+                    int i, size_t count, const std::function<bool(int)>& eligible) {
+  std::vector<int> expected;
+  for (int j = 0; j < similarity.rows(); ++j) {
+    if (j != i && eligible(j) && similarity(i, j) > 0) expected.push_back(j);
+  }
+  std::stable_sort(expected.begin(), expected.end(),
+                   [&](int a, int b) { return similarity(i, a) > similarity(i, b); });
+  ASSERT_EQ(listed.size(), std::min(count, expected.size())) << "image " << i;
+  if (listed.empty()) return;
+  const float cut = similarity(i, expected[listed.size() - 1]);
+  const float tolerance = kRelativeTolerance * cut;
+  std::set<int> listed_indices;
+  for (size_t k = 0; k < listed.size(); ++k) {
+    const ScoredIndex& s = listed[k];
+    ASSERT_TRUE(s.index >= 0 && s.index < similarity.rows() && s.index != i && eligible(s.index))
+        << "image " << i << " lists " << s.index;
+    EXPECT_TRUE(NearRelative(s.score, similarity(i, s.index))) << i << " " << s.index;
+    EXPECT_GE(similarity(i, s.index), cut - tolerance) << i << " " << s.index;
+    listed_indices.insert(s.index);
+    if (k > 0) {  // exact order on the listed scores, near-tie order against the matrix
+      const ScoredIndex& previous = listed[k - 1];
+      EXPECT_TRUE(previous.score > s.score ||
+                  (previous.score == s.score && previous.index < s.index))
+          << "image " << i << " position " << k;
+      EXPECT_GE(similarity(i, previous.index), similarity(i, s.index) * (1 - kRelativeTolerance));
+    }
+  }
+  for (const int j : expected) {
+    if (similarity(i, j) > cut + tolerance) {
+      EXPECT_TRUE(listed_indices.count(j)) << i << " " << j;
+    }
+  }
+}
+
+TEST_P(ImageDatabaseNormTest, CandidatesAgreeWithSimilarityMatrix) {
+  const ImageDatabase database = ZipfDatabase(GetParam());
+  const Eigen::MatrixXf similarity = database.SimilarityMatrix();
+  const int n = database.NumImages();
+  constexpr int kNumBest = 5, kNumFar = 3, kGap = 10;
+  const SimilarityCandidates candidates = database.Candidates(kNumBest, kNumFar, kGap);
+  ASSERT_EQ(candidates.best.size(), static_cast<size_t>(n));
+  ASSERT_EQ(candidates.far.size(), static_cast<size_t>(n));
+  int num_empty = 0;
+  for (int i = 0; i < n; ++i) {
+    ExpectTopOfRow(candidates.best[i], similarity, i, kNumBest, [](int) { return true; });
+    ExpectTopOfRow(candidates.far[i], similarity, i, kNumFar,
+                   [&](int j) { return std::abs(i - j) > kGap; });
+    num_empty += candidates.best[i].empty();
+  }
+  EXPECT_GT(num_empty, 0);  // images without weighted words, as the database is built
+
+  // More partners than images: every positive-scoring image, and the same pair scores the same
+  // from both sides.
+  const SimilarityCandidates all = database.Candidates(n + 10, n + 10, 0);
+  for (int i = 0; i < n; ++i) {
+    ExpectTopOfRow(all.best[i], similarity, i, n + 10, [](int) { return true; });
+    EXPECT_EQ(all.far[i], all.best[i]);  // a gap of 0 leaves out only the image itself
+    for (const ScoredIndex& s : all.best[i]) {
+      const auto& back = all.best[s.index];
+      const auto it = std::find_if(back.begin(), back.end(),
+                                   [&](const ScoredIndex& t) { return t.index == i; });
+      ASSERT_NE(it, back.end()) << i << " " << s.index;
+      EXPECT_EQ(it->score, s.score) << i << " " << s.index;
+    }
+  }
+
+  // Blocks of images run in parallel; the lists do not depend on how many threads run them.
+  // Four threads even on a smaller machine: the arena alone gets no more workers than cores.
+  SimilarityCandidates one_thread, four_threads;
+  {
+    tbb::global_control limit(tbb::global_control::max_allowed_parallelism, 4);
+    tbb::task_arena arena(4);
+    arena.execute([&] { four_threads = database.Candidates(kNumBest, kNumFar, kGap); });
+  }
+  {
+    tbb::global_control limit(tbb::global_control::max_allowed_parallelism, 1);
+    one_thread = database.Candidates(kNumBest, kNumFar, kGap);
+  }
+  EXPECT_EQ(one_thread.best, candidates.best);
+  EXPECT_EQ(one_thread.far, candidates.far);
+  EXPECT_EQ(four_threads.best, candidates.best);
+  EXPECT_EQ(four_threads.far, candidates.far);
+}
+
+TEST_P(ImageDatabaseNormTest, ForEachSimilarityRowStreamsTheMatrix) {
+  // 150 images: two whole blocks of rows and a partial one.
+  const ImageDatabase database = ZipfDatabase(GetParam());
+  const Eigen::MatrixXf similarity = database.SimilarityMatrix();
+  const int n = database.NumImages();
+  const SimilarityCandidates candidates = database.Candidates(n, 0, 0);
+  std::vector<int> visited;
+  database.ForEachSimilarityRow([&](int row, const float* scores) {
+    visited.push_back(row);
+    for (int j = 0; j < n; ++j) {
+      ASSERT_TRUE(NearRelative(scores[j], similarity(row, j))) << row << " " << j;
+    }
+    // The same scores as the candidate lists, to the bit.
+    for (const ScoredIndex& s : candidates.best[row]) EXPECT_EQ(scores[s.index], s.score);
+  });
+  std::vector<int> expected(n);
+  for (int i = 0; i < n; ++i) expected[i] = i;
+  EXPECT_EQ(visited, expected);
+}
+
 INSTANTIATE_TEST_SUITE_P(Norms, ImageDatabaseNormTest,
                          ::testing::Values(TfIdfNorm::kL1, TfIdfNorm::kL2), [](const auto& info) {
                            return info.param == TfIdfNorm::kL1 ? "L1" : "L2";
@@ -230,6 +355,43 @@ TEST(ImageDatabase, ImageWithoutWordsScoresZero) {
   EXPECT_EQ(similarity(0, 0), 0.0f);
   EXPECT_NEAR(similarity(1, 1), 1.0f, 1e-6f);
   EXPECT_EQ(similarity.row(0).norm(), 0.0f);
+}
+
+TEST(ImageDatabase, CandidatesOnlyListImagesThatShareWords) {
+  ImageDatabase database(10);
+  database.AddImage(1, {});
+  database.AddImage(2, {1, 2});
+  database.AddImage(3, {2, 3});
+  database.AddImage(4, {5});  // a word of its own: weighted, but shared with no image
+  database.Finalize();
+  const SimilarityCandidates candidates = database.Candidates(3, 3, 0);
+  for (const int i : {0, 3}) {
+    EXPECT_TRUE(candidates.best[i].empty()) << i;
+    EXPECT_TRUE(candidates.far[i].empty()) << i;
+  }
+  ASSERT_EQ(candidates.best[1].size(), 1u);
+  EXPECT_EQ(candidates.best[1][0].index, 2);
+  ASSERT_EQ(candidates.best[2].size(), 1u);
+  EXPECT_EQ(candidates.best[2][0].index, 1);
+  EXPECT_EQ(candidates.far[1], candidates.best[1]);  // a gap of 0 leaves out only the image
+  // Images 2 and 3 are neighbours (indices 1 and 2): a gap of 1 leaves them no far partner.
+  const SimilarityCandidates gapped = database.Candidates(3, 3, 1);
+  EXPECT_EQ(gapped.best, candidates.best);
+  for (const auto& far : gapped.far) EXPECT_TRUE(far.empty());
+  // The streamed rows still hold the self-scores, 0 for the image without words.
+  std::vector<float> diagonal;
+  database.ForEachSimilarityRow(
+      [&](int row, const float* scores) { diagonal.push_back(scores[row]); });
+  ASSERT_EQ(diagonal.size(), 4u);
+  EXPECT_EQ(diagonal[0], 0.0f);
+  for (int i = 1; i < 4; ++i) EXPECT_NEAR(diagonal[i], 1.0f, 1e-6f);
+
+  ImageDatabase empty(10);
+  empty.Finalize();
+  EXPECT_TRUE(empty.Candidates(3, 3, 0).best.empty());
+  int num_rows = 0;
+  empty.ForEachSimilarityRow([&](int, const float*) { ++num_rows; });
+  EXPECT_EQ(num_rows, 0);
 }
 
 TEST(ImageDatabase, RejectsBadInput) {
