@@ -1,0 +1,167 @@
+#!/usr/bin/env python3
+"""How loopsfm grows with the length of a video (issue 39): rendered street walks of 1k, 2k,
+5k and 10k frames at the same density, end to end, with time and peak memory per stage,
+fitted exponents, and accuracy against ground truth at each size.
+
+    bench/scale/scale.py render --workdir DIR [--sizes 1k,2k,5k,10k]
+    bench/scale/scale.py run --workdir DIR [--sizes ...] [--loopsfm build/loopsfm]
+        [-- EXTRA RECONSTRUCT FLAGS]
+
+`render` writes DIR/<size>/video.mp4 and groundtruth.txt with `loopsfm synth street`: 30 fps,
+about 0.1 m a frame (a brisk walk), hand-held shake (1 degree) and jitter (2 cm), sensor
+noise, JPEG, the view turned 20 degrees ahead. 1k and 2k walk one and two laps round a
+block, 5k two and a half laps of a figure eight round two blocks, 10k five laps: every size
+returns to places it has seen (loops to close). `run` reconstructs each with default flags
+(self-calibrated, adaptive keyframes), one after the other, scores it with `loopsfm eval`,
+prints a Markdown table and the fitted exponents (time ~ frames^k by least squares on
+log-log), and writes DIR/scale.json. Standard library only.
+"""
+
+import argparse
+import json
+import math
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "vs_colmap"))
+from vsc_tools import LOOPSFM_TIME, LOOPSFM_TOTAL, log, run_measured  # noqa: E402
+
+COMMON = ["--video", "--width", "640", "--height", "360", "--look-ahead", "20", "--shake", "1",
+          "--jitter", "2", "--noise", "2", "--jpeg-quality", "80"]
+SCENES = {
+    "1k": ["--frames", "1000", "--route", "block", "--laps", "1", "--revisit", "0"],
+    "2k": ["--frames", "2000", "--route", "block", "--laps", "2", "--revisit", "0"],
+    "5k": ["--frames", "5000", "--route", "figure8", "--laps", "2", "--revisit", "0.5"],
+    "10k": ["--frames", "10000", "--route", "figure8", "--laps", "5", "--revisit", "0"],
+}
+STAGES = ("extract", "match", "fill-in", "map", "localise")
+
+
+def render(args, sizes):
+    for size in sizes:
+        out = args.workdir / size
+        if (out / "video.mp4").exists():
+            log(f"{size}: {out / 'video.mp4'} exists; not rendered again")
+            continue
+        cmd = [args.loopsfm, "synth", "street", "-o", out, "-q"] + SCENES[size] + COMMON
+        log(f"{size}: {' '.join(str(c) for c in cmd)}")
+        if subprocess.run([str(c) for c in cmd]).returncode != 0:
+            log(f"{size}: rendering failed")
+            return 1
+    return 0
+
+
+def evaluate(loopsfm, estimate, groundtruth):
+    proc = subprocess.run([str(loopsfm), "eval", str(estimate), str(groundtruth), "--json"],
+                          capture_output=True, text=True)
+    if proc.returncode != 0:
+        log(f"eval of {estimate} failed: {proc.stderr.strip()}")
+        return {}
+    m = json.loads(proc.stdout)
+    gaps = m.get("loop_gaps") or {}
+    return {"frames": m["num_matched"],
+            "ate_pct": 100.0 * m["ate_fraction_of_path"] if m.get("aligned") else None,
+            "rot_deg": m.get("rotation_error_mean_deg"),
+            "gap_max": gaps.get("max") if gaps.get("num_revisits") else None}
+
+
+def run_one(args, size, extra):
+    scene = args.workdir / size
+    out = args.workdir / f"{size}_out"
+    shutil.rmtree(out, ignore_errors=True)
+    cmd = [args.loopsfm, "reconstruct", scene / "video.mp4", "-o", out, "--export", "colmap,tum"]
+    cmd += extra
+    log(f"{size}: {' '.join(str(c) for c in cmd)}")
+    proc = run_measured(cmd, args.workdir / f"{size}.log")
+    text = Path(proc["log"]).read_text()
+    result = {"size": size, "rc": proc["rc"], "wall_s": proc["wall_s"],
+              "peak_mib": proc["peak_mib"],
+              "stages": {k: float(v) for k, v in LOOPSFM_TIME.findall(text)},
+              "video_frames": sum(1 for l in (scene / "groundtruth.txt").read_text().splitlines()
+                                  if l.strip() and not l.startswith("#"))}
+    total = LOOPSFM_TOTAL.search(text)
+    result["total_s"] = float(total.group(1)) if total else None
+    frames = [l for l in text.splitlines() if l.startswith("frames ")]
+    result["kept"] = int(frames[-1].split()[1]) if frames else None
+    sparse = out / "sparse"
+    result["models"] = sum(1 for p in sparse.iterdir() if p.is_dir()) if sparse.is_dir() else 0
+    result["mapped"] = evaluate(args.loopsfm, sparse / "0", scene / "groundtruth.txt")
+    log(f"{size}: {result['total_s']} s, peak {result['peak_mib']} MiB, kept {result['kept']}, "
+        f"{result['mapped']}")
+    return result
+
+
+def exponent(xs, ys):
+    """Least-squares slope of log y against log x; None with fewer than two usable points."""
+    pts = [(math.log(x), math.log(y)) for x, y in zip(xs, ys) if x and y and x > 0 and y > 0]
+    if len(pts) < 2:
+        return None
+    mx = sum(p[0] for p in pts) / len(pts)
+    my = sum(p[1] for p in pts) / len(pts)
+    sxx = sum((p[0] - mx) ** 2 for p in pts)
+    return sum((p[0] - mx) * (p[1] - my) for p in pts) / sxx if sxx > 0 else None
+
+
+def fmt(value, digits=1):
+    return "-" if value is None else f"{value:.{digits}f}"
+
+
+def report(results):
+    rows = ["| video frames | kept | models | mapped | extract s | match s | map s | total s | "
+            "peak MiB | ATE % path | rot. deg | loop gap max |",
+            "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
+    for r in results:
+        s, m = r["stages"], r["mapped"]
+        rows.append(f"| {r['video_frames']} | {r['kept']} | {r['models']} | {m.get('frames')} | "
+                    f"{fmt(s.get('extract'))} | {fmt(s.get('match'))} | {fmt(s.get('map'))} | "
+                    f"{fmt(r['total_s'])} | {fmt(r['peak_mib'], 0)} | {fmt(m.get('ate_pct'), 4)} | "
+                    f"{fmt(m.get('rot_deg'), 3)} | {fmt(m.get('gap_max'), 4)} |")
+    xs = [r["video_frames"] for r in results]
+    fits = {"total": exponent(xs, [r["total_s"] for r in results]),
+            "peak memory": exponent(xs, [r["peak_mib"] for r in results]),
+            "kept frames": exponent(xs, [r["kept"] for r in results])}
+    for stage in STAGES:
+        fits[stage] = exponent(xs, [r["stages"].get(stage) for r in results])
+    lines = ["", "Fitted exponents (quantity ~ video frames^k):"]
+    lines += [f"- {name}: {fmt(k, 2)}" for name, k in fits.items() if k is not None]
+    return "\n".join(rows + lines), fits
+
+
+def main(argv):
+    extra = []
+    if "--" in argv:
+        extra = argv[argv.index("--") + 1:]
+        argv = argv[:argv.index("--")]
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("action", choices=("render", "run"))
+    parser.add_argument("--workdir", type=Path, required=True)
+    parser.add_argument("--sizes", default=",".join(SCENES))
+    parser.add_argument("--loopsfm", type=Path,
+                        default=Path(__file__).resolve().parents[2] / "build" / "loopsfm")
+    args = parser.parse_args(argv)
+    sizes = [s for s in args.sizes.split(",") if s]
+    unknown = [s for s in sizes if s not in SCENES]
+    if unknown or not args.loopsfm.exists():
+        print(f"scale.py: unknown sizes {unknown} (choose from {', '.join(SCENES)}) or no "
+              f"{args.loopsfm}", file=sys.stderr)
+        return 2
+    args.workdir.mkdir(parents=True, exist_ok=True)
+    if args.action == "render":
+        return render(args, sizes)
+    missing = [s for s in sizes if not (args.workdir / s / "video.mp4").exists()]
+    if missing:
+        print(f"scale.py: no rendered video for {', '.join(missing)}; run `scale.py render` "
+              f"first", file=sys.stderr)
+        return 2
+    results = [run_one(args, size, extra) for size in sizes]
+    text, fits = report(results)
+    (args.workdir / "scale.json").write_text(json.dumps({"runs": results, "exponents": fits,
+                                                         "extra_flags": extra}, indent=2))
+    print(text)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))
