@@ -49,6 +49,7 @@ point3D_t Reconstruction::AddPoint3D(const Eigen::Vector3d& xyz, const Track& tr
                       el.point2D_idx);
     p.point3D_id = id;
     ++images_.at(el.image_id).num_points3D;
+    NoteLink(el.image_id, el.point2D_idx, true);
   }
   Point3D& point = points3D_[id];
   point.xyz = xyz;
@@ -63,6 +64,7 @@ void Reconstruction::AddObservation(point3D_t point3D_id, const TrackElement& el
   LOOPSFM_CHECK(!p.HasPoint3D());
   p.point3D_id = point3D_id;
   ++image.num_points3D;
+  NoteLink(el.image_id, el.point2D_idx, true);
   points3D_.at(point3D_id).track.elements.push_back(el);
 }
 
@@ -80,6 +82,7 @@ void Reconstruction::DeleteObservation(image_t image_id, point2D_t point2D_idx) 
                  elements.end());
   image.points2D[point2D_idx].point3D_id = kInvalidPoint3DId;
   --image.num_points3D;
+  NoteLink(image_id, point2D_idx, false);
 }
 
 void Reconstruction::DeletePoint3D(point3D_t point3D_id) {
@@ -88,6 +91,7 @@ void Reconstruction::DeletePoint3D(point3D_t point3D_id) {
     Image& image = images_.at(el.image_id);
     image.points2D.at(el.point2D_idx).point3D_id = kInvalidPoint3DId;
     --image.num_points3D;
+    NoteLink(el.image_id, el.point2D_idx, false);
   }
   points3D_.erase(point3D_id);
 }
@@ -191,6 +195,7 @@ void Reconstruction::RestoreMapped(const MappedState& state) {
       Image& image = it->second;
       image.points2D[el.point2D_idx].point3D_id = saved.point3D_id;
       ++image.num_points3D;
+      NoteLink(el.image_id, el.point2D_idx, true);
     }
     Point3D& point = points3D_[saved.point3D_id];
     point.xyz = saved.xyz;

@@ -6,6 +6,7 @@
 #include <optional>
 #include <string>
 #include <unordered_map>
+#include <utility>
 #include <vector>
 
 #include <Eigen/Core>
@@ -139,12 +140,32 @@ class Reconstruction {
   // registered images given, with the points they observe (for exporting several models).
   Reconstruction Subset(const std::vector<image_t>& image_ids) const;
 
+  // A keypoint linked to a 3D point or unlinked from one.
+  struct LinkChange {
+    image_t image_id;
+    point2D_t point2D_idx;
+    bool linked;
+  };
+  // From now on, records every change of a keypoint's link to a 3D point (AddPoint3D,
+  // AddObservation, DeleteObservation, DeletePoint3D, MergePoints3D, RestoreMapped, and so
+  // DeRegisterImage), so that a caller can keep counts over the model up to date instead of
+  // walking every point (the mapper's ranking of the next frame). Off until called.
+  void RecordLinkChanges() { record_links_ = true; }
+  // The changes recorded since the last call, oldest first; clears them.
+  std::vector<LinkChange> TakeLinkChanges() { return std::exchange(link_changes_, {}); }
+
  private:
+  void NoteLink(image_t image_id, point2D_t point2D_idx, bool linked) {
+    if (record_links_) link_changes_.push_back({image_id, point2D_idx, linked});
+  }
+
   std::unordered_map<camera_t, Camera> cameras_;
   std::map<image_t, Image> images_;
   std::unordered_map<point3D_t, Point3D> points3D_;
   std::vector<image_t> reg_image_ids_;
   point3D_t next_point3D_id_ = 1;
+  bool record_links_ = false;
+  std::vector<LinkChange> link_changes_;
 };
 
 }  // namespace loopsfm

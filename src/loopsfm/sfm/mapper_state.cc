@@ -42,6 +42,9 @@ MapperState::MapperState(const MapperInput& input, const IncrementalMapperOption
     }
     track_frame_begin_.push_back(static_cast<int>(track_frames_.size()));
   }
+  track_links_.assign(input.tracks.size(), 0);
+  linked_tracks_of_frame_.assign(input.frames.size(), 0);
+  reconstruction_.RecordLinkChanges();
 }
 
 int MapperState::TrackOf(image_t image_id, point2D_t idx) const {
@@ -373,9 +376,31 @@ MapperState::NeighbourAgreement MapperState::AgreementWithNeighbours(
   return agreement;
 }
 
-std::unordered_map<image_t, size_t> MapperState::CountVisibleTracks() const {
-  // Called before every registration, over every point of the model: flat arrays by capture
-  // index, so that a track element costs no hash lookup.
+std::unordered_map<image_t, size_t> MapperState::CountVisibleTracks() {
+  for (const Reconstruction::LinkChange& change : reconstruction_.TakeLinkChanges()) {
+    const int track = TrackOf(change.image_id, change.point2D_idx);
+    if (track < 0) continue;
+    // A track counts for its frames while at least one of its keypoints is linked.
+    const int before = track_links_[track];
+    track_links_[track] += change.linked ? 1 : -1;
+    LOOPSFM_CHECK(track_links_[track] >= 0);
+    const int delta = (track_links_[track] > 0) - (before > 0);
+    if (delta == 0) continue;
+    for (int e = track_frame_begin_[track]; e < track_frame_begin_[track + 1]; ++e) {
+      linked_tracks_of_frame_[track_frames_[e]] += delta;
+    }
+  }
+  std::unordered_map<image_t, size_t> visible;
+  for (size_t k = 0; k < input_.frames.size(); ++k) {
+    const image_t id = input_.frames[k].image_id;
+    if (linked_tracks_of_frame_[k] > 0 && !reconstruction_.IsRegistered(id)) {
+      visible[id] = static_cast<size_t>(linked_tracks_of_frame_[k]);
+    }
+  }
+  return visible;
+}
+
+std::unordered_map<image_t, size_t> MapperState::CountVisibleTracksByScan() const {
   const size_t num_frames = input_.frames.size();
   std::vector<char> registered(num_frames);
   for (size_t k = 0; k < num_frames; ++k) {

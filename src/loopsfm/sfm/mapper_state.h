@@ -67,8 +67,12 @@ class MapperState {
   // Deletes observations with a large reprojection error or behind the camera, then points
   // with a small triangulation angle. Over the given points, or all when empty.
   size_t FilterPoints(const std::vector<point3D_t>& point_ids);
-  // For every image not registered here: how many tracks with a 3D point it sees.
-  std::unordered_map<image_t, size_t> CountVisibleTracks() const;
+  // For every image not registered here: how many tracks with a 3D point it sees. Kept up to
+  // date from the model's link changes, so a call costs the changes since the last one and a
+  // pass over the frames, not a walk over every point.
+  std::unordered_map<image_t, size_t> CountVisibleTracks();
+  // The same by walking every point of the model (tests compare the two).
+  std::unordered_map<image_t, size_t> CountVisibleTracksByScan() const;
   // Reprojection error in pixels of a position in the image of an observation; infinity
   // behind the camera.
   double ReprojectionErrorPx(const Eigen::Vector3d& xyz, const TrackElement& element) const;
@@ -165,6 +169,9 @@ class MapperState {
   // Capture indices of the frames of track t: track_frames_[track_frame_begin_[t] ..
   // track_frame_begin_[t + 1]).
   std::vector<int> track_frame_begin_, track_frames_;
+  // Per input track, its keypoints linked to a 3D point; per frame (capture index), its
+  // tracks with at least one. Brought up to date from reconstruction_'s link changes.
+  std::vector<int> track_links_, linked_tracks_of_frame_;
   image_t gauge1_ = kInvalidImageId, gauge2_ = kInvalidImageId;
 };
 

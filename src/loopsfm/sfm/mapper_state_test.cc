@@ -133,6 +133,45 @@ TEST(MapperState, CountsVisibleTracksOncePerTrack) {
   EXPECT_EQ(visible.count(1), 0u);  // registered
 }
 
+// The counts kept from the model's link changes agree with a walk over every point after each
+// kind of change: registration with triangulation, drifted frames (tracks split into several
+// points), filtering, points fused, a frame deregistered, retriangulation, and a model
+// restored from a checkpoint.
+TEST(MapperState, VisibleTrackCountsFollowEveryChangeOfTheModel) {
+  const MapperProblem p = MakeMapperProblem(SmallProblem());
+  IncrementalMapperOptions options;
+  MapperState state(p.input, options);
+  auto expect_agree = [&](const char* after) {
+    const auto kept = state.CountVisibleTracks();
+    EXPECT_EQ(kept, state.CountVisibleTracksByScan()) << "after " << after;
+    return kept.size();
+  };
+  expect_agree("nothing");
+  RegisterAtTruth(p, state, 0, 3);
+  EXPECT_GT(expect_agree("registering frames 0-2"), 0u);
+  RegisterAtTruth(p, state, 3, 7, 5, Eigen::Vector3d(0.5, 0, 0));
+  expect_agree("registering drifted frames");
+  ASSERT_GT(TracksWithSeveralPoints(state), 0);
+  for (int t = 0; t < static_cast<int>(p.input.tracks.size()); ++t) {
+    const std::vector<point3D_t> points = state.PointsOfTrack(t);
+    if (points.size() >= 2) state.FusePoints(points[0], points[1]);
+  }
+  expect_agree("fusing points");
+  options.max_reproj_error_px = 0.5;  // the state reads the options it was given
+  EXPECT_GT(state.FilterPoints({}), 0u);
+  options.max_reproj_error_px = IncrementalMapperOptions().max_reproj_error_px;
+  expect_agree("filtering");
+  state.reconstruction().DeRegisterImage(p.input.frames[1].image_id);
+  expect_agree("deregistering a frame");
+  state.RetriangulateAll();
+  expect_agree("retriangulating");
+  state.SetGauge(p.input.frames[0].image_id, p.input.frames[2].image_id);
+  MapperState restored(p.input, options);
+  restored.Restore(state.Save());
+  EXPECT_EQ(restored.CountVisibleTracks(), restored.CountVisibleTracksByScan());
+  EXPECT_EQ(restored.CountVisibleTracks(), state.CountVisibleTracks());
+}
+
 }  // namespace
 }  // namespace loopsfm
 
