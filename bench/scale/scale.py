@@ -6,6 +6,7 @@ fitted exponents, and accuracy against ground truth at each size.
     bench/scale/scale.py render --workdir DIR [--sizes 1k,2k,5k,10k]
     bench/scale/scale.py run --workdir DIR [--sizes ...] [--loopsfm build/loopsfm]
         [-- EXTRA RECONSTRUCT FLAGS]
+    bench/scale/scale.py report --workdir DIR [--sizes ...]
 
 `render` writes DIR/<size>/video.mp4 and groundtruth.txt with `loopsfm synth street`: 30 fps,
 about 0.1 m a frame (a brisk walk), hand-held shake (1 degree) and jitter (2 cm), sensor
@@ -14,7 +15,10 @@ block, 5k two and a half laps of a figure eight round two blocks, 10k five laps:
 returns to places it has seen (loops to close). `run` reconstructs each with default flags
 (self-calibrated, adaptive keyframes), one after the other, scores it with `loopsfm eval`,
 prints a Markdown table and the fitted exponents (time ~ frames^k by least squares on
-log-log), and writes DIR/scale.json. Standard library only.
+log-log), and writes DIR/scale.json; sizes run earlier into DIR with the same flags stay in the
+table, so the sizes can be run one at a time. `report` rebuilds the table from the logs and
+outputs of earlier runs (the peak memory then from loopsfm's own report line). Standard
+library only.
 """
 
 import argparse
@@ -75,21 +79,31 @@ def run_one(args, size, extra):
     cmd += extra
     log(f"{size}: {' '.join(str(c) for c in cmd)}")
     proc = run_measured(cmd, args.workdir / f"{size}.log")
-    text = Path(proc["log"]).read_text()
-    result = {"size": size, "rc": proc["rc"], "wall_s": proc["wall_s"],
-              "peak_mib": proc["peak_mib"],
+    result = collect(args, size)
+    result.update({"rc": proc["rc"], "wall_s": proc["wall_s"], "peak_mib": proc["peak_mib"]})
+    log(f"{size}: {result['total_s']} s, peak {result['peak_mib']} MiB, kept {result['kept']}, "
+        f"{result['mapped']}")
+    return result
+
+
+def collect(args, size):
+    """What DIR/<size>.log and DIR/<size>_out say of a finished run."""
+    scene = args.workdir / size
+    out = args.workdir / f"{size}_out"
+    text = (args.workdir / f"{size}.log").read_text()
+    result = {"size": size,
               "stages": {k: float(v) for k, v in LOOPSFM_TIME.findall(text)},
               "video_frames": sum(1 for l in (scene / "groundtruth.txt").read_text().splitlines()
                                   if l.strip() and not l.startswith("#"))}
     total = LOOPSFM_TOTAL.search(text)
     result["total_s"] = float(total.group(1)) if total else None
+    # The run's own peak (loopsfm's report line); run_one replaces it by the measured one.
+    result["peak_mib"] = float(total.group(2)) if total else None
     frames = [l for l in text.splitlines() if l.startswith("frames ")]
     result["kept"] = int(frames[-1].split()[1]) if frames else None
     sparse = out / "sparse"
     result["models"] = sum(1 for p in sparse.iterdir() if p.is_dir()) if sparse.is_dir() else 0
     result["mapped"] = evaluate(args.loopsfm, sparse / "0", scene / "groundtruth.txt")
-    log(f"{size}: {result['total_s']} s, peak {result['peak_mib']} MiB, kept {result['kept']}, "
-        f"{result['mapped']}")
     return result
 
 
@@ -123,7 +137,9 @@ def report(results):
             "peak memory": exponent(xs, [r["peak_mib"] for r in results]),
             "kept frames": exponent(xs, [r["kept"] for r in results])}
     for stage in STAGES:
-        fits[stage] = exponent(xs, [r["stages"].get(stage) for r in results])
+        times = [r["stages"].get(stage) for r in results]
+        if max((t or 0) for t in times) >= 1.0:  # a stage that took no time has no growth
+            fits[stage] = exponent(xs, times)
     lines = ["", "Fitted exponents (quantity ~ video frames^k):"]
     lines += [f"- {name}: {fmt(k, 2)}" for name, k in fits.items() if k is not None]
     return "\n".join(rows + lines), fits
@@ -135,7 +151,7 @@ def main(argv):
         extra = argv[argv.index("--") + 1:]
         argv = argv[:argv.index("--")]
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("action", choices=("render", "run"))
+    parser.add_argument("action", choices=("render", "run", "report"))
     parser.add_argument("--workdir", type=Path, required=True)
     parser.add_argument("--sizes", default=",".join(SCENES))
     parser.add_argument("--loopsfm", type=Path,
@@ -151,11 +167,23 @@ def main(argv):
     if args.action == "render":
         return render(args, sizes)
     missing = [s for s in sizes if not (args.workdir / s / "video.mp4").exists()]
-    if missing:
+    if missing and args.action == "run":
         print(f"scale.py: no rendered video for {', '.join(missing)}; run `scale.py render` "
               f"first", file=sys.stderr)
         return 2
-    results = [run_one(args, size, extra) for size in sizes]
+    if args.action == "report":
+        results = [collect(args, size) for size in sizes
+                   if (args.workdir / f"{size}.log").exists() and size not in missing]
+    else:
+        results = [run_one(args, size, extra) for size in sizes]
+    # Sizes run before into the same folder (with the same extra flags) stay in the table, so
+    # the sizes can be run one at a time.
+    saved = args.workdir / "scale.json"
+    if saved.exists():
+        before = json.loads(saved.read_text())
+        if before.get("extra_flags") == extra:
+            results += [r for r in before["runs"] if r["size"] not in sizes]
+    results.sort(key=lambda r: r["video_frames"])
     text, fits = report(results)
     (args.workdir / "scale.json").write_text(json.dumps({"runs": results, "exponents": fits,
                                                          "extra_flags": extra}, indent=2))

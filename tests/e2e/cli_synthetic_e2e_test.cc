@@ -339,9 +339,29 @@ TEST_F(CliSyntheticTest, SequentialPairsLeaveTheLoopOpenVocabTreeClosesIt) {
 
   // Vocabulary-tree loop detection on the same database (sequential pairs are resumed)
   // finds a loop pair without trying every pair.
-  const CommandResult guided = RunLoopsfm(
-      {"-q", "match", "-d", db.string(), "--pairs", "vocabtree", "--overlap", "3"});
+  const fs::path similarity = tmp / "similarity.txt";
+  const CommandResult guided =
+      RunLoopsfm({"-q", "match", "-d", db.string(), "--pairs", "vocabtree", "--overlap", "3",
+                  "--similarity-out", similarity.string()});
   ASSERT_EQ(guided.exit_code, 0) << guided;
+  {
+    // The similarity streamed row by row: a line of names, then n symmetric rows of n scores
+    // with each frame's score with itself (1 up to rounding) on the diagonal.
+    std::ifstream in(similarity);
+    std::string line;
+    ASSERT_TRUE(std::getline(in, line));
+    std::vector<std::vector<double>> rows;
+    while (std::getline(in, line)) {
+      std::istringstream fields(line);
+      rows.emplace_back(std::istream_iterator<double>(fields), std::istream_iterator<double>());
+    }
+    ASSERT_EQ(rows.size(), static_cast<size_t>(kNumFrames));
+    for (size_t i = 0; i < rows.size(); ++i) {
+      ASSERT_EQ(rows[i].size(), rows.size()) << "row " << i;
+      EXPECT_NEAR(rows[i][i], 1.0, 1e-3) << "row " << i;
+      for (size_t j = 0; j < i; ++j) EXPECT_NEAR(rows[i][j], rows[j][i], 1e-5);
+    }
+  }
   int loop_inliers = 0;
   {
     const Database database = Database::Open(db.string());
