@@ -20,33 +20,14 @@ import argparse
 import json
 import shutil
 import statistics
-import subprocess
 import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "vs_colmap"))
-from vsc_tools import LOOPSFM_TIME, LOOPSFM_TOTAL, log, run_measured  # noqa: E402
+from vsc_tools import (LOOPSFM_TIME, LOOPSFM_TOTAL, eval_trajectory, fmt, log,  # noqa: E402
+                       num_models, run_measured)
 
 RUNS = ("default", "every1", "everyN", "allframes")
-
-
-def evaluate(loopsfm, estimate, groundtruth):
-    """`loopsfm eval --json` of a model folder or trajectory file; None when it fails."""
-    proc = subprocess.run([str(loopsfm), "eval", str(estimate), str(groundtruth), "--json"],
-                          capture_output=True, text=True)
-    if proc.returncode != 0:
-        log(f"eval of {estimate} failed: {proc.stderr.strip()}")
-        return None
-    m = json.loads(proc.stdout)
-    gaps = m.get("loop_gaps") or {}
-    return {"frames": m["num_matched"], "gt_frames": m["num_gt_frames"],
-            "ate_pct": 100.0 * m["ate_fraction_of_path"] if m.get("aligned") else None,
-            "rot_deg": m.get("rotation_error_mean_deg"),
-            "gap_max": gaps.get("max") if gaps.get("num_revisits") else None}
-
-
-def num_models(sparse):
-    return sum(1 for p in sparse.iterdir() if p.is_dir()) if sparse.is_dir() else 0
 
 
 def one_run(args, name, every_n, round_index):
@@ -73,10 +54,10 @@ def one_run(args, name, every_n, round_index):
     frames = [l for l in text.splitlines() if l.startswith("frames ")]
     result["kept"] = int(frames[-1].split()[1]) if frames else None
     result["models"] = num_models(out / "sparse")
-    result["mapped"] = evaluate(args.loopsfm, out / "sparse" / "0", args.groundtruth)
+    result["mapped"] = eval_trajectory(args.loopsfm, out / "sparse" / "0", args.groundtruth)
     if name == "allframes":
-        result["all"] = evaluate(args.loopsfm, out / "trajectory.txt", args.groundtruth)
-        result["localized"] = evaluate(args.loopsfm, out / "localized.txt", args.groundtruth)
+        result["all"] = eval_trajectory(args.loopsfm, out / "trajectory.txt", args.groundtruth)
+        result["localized"] = eval_trajectory(args.loopsfm, out / "localized.txt", args.groundtruth)
     log(f"{name}: {result.get('total_s')} s, kept {result['kept']}, {result['mapped']}")
     return result
 
@@ -95,10 +76,6 @@ def median_run(runs):
     first["stages"] = {k: statistics.median(v) for k, v in stages.items()}
     first["rounds"] = len(runs)
     return first
-
-
-def fmt(value, digits=1):
-    return "-" if value is None else f"{value:.{digits}f}"
 
 
 def table(results):

@@ -30,7 +30,8 @@ import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "vs_colmap"))
-from vsc_tools import LOOPSFM_TIME, LOOPSFM_TOTAL, log, run_measured  # noqa: E402
+from vsc_tools import (LOOPSFM_TIME, LOOPSFM_TOTAL, eval_trajectory, fmt, log,  # noqa: E402
+                       num_models, run_measured)
 
 COMMON = ["--video", "--width", "640", "--height", "360", "--look-ahead", "20", "--shake", "1",
           "--jitter", "2", "--noise", "2", "--jpeg-quality", "80"]
@@ -55,20 +56,6 @@ def render(args, sizes):
             log(f"{size}: rendering failed")
             return 1
     return 0
-
-
-def evaluate(loopsfm, estimate, groundtruth):
-    proc = subprocess.run([str(loopsfm), "eval", str(estimate), str(groundtruth), "--json"],
-                          capture_output=True, text=True)
-    if proc.returncode != 0:
-        log(f"eval of {estimate} failed: {proc.stderr.strip()}")
-        return {}
-    m = json.loads(proc.stdout)
-    gaps = m.get("loop_gaps") or {}
-    return {"frames": m["num_matched"],
-            "ate_pct": 100.0 * m["ate_fraction_of_path"] if m.get("aligned") else None,
-            "rot_deg": m.get("rotation_error_mean_deg"),
-            "gap_max": gaps.get("max") if gaps.get("num_revisits") else None}
 
 
 def run_one(args, size, extra):
@@ -101,9 +88,9 @@ def collect(args, size):
     result["peak_mib"] = float(total.group(2)) if total else None
     frames = [l for l in text.splitlines() if l.startswith("frames ")]
     result["kept"] = int(frames[-1].split()[1]) if frames else None
-    sparse = out / "sparse"
-    result["models"] = sum(1 for p in sparse.iterdir() if p.is_dir()) if sparse.is_dir() else 0
-    result["mapped"] = evaluate(args.loopsfm, sparse / "0", scene / "groundtruth.txt")
+    result["models"] = num_models(out / "sparse")
+    result["mapped"] = eval_trajectory(args.loopsfm, out / "sparse" / "0",
+                                       scene / "groundtruth.txt") or {}
     return result
 
 
@@ -116,10 +103,6 @@ def exponent(xs, ys):
     my = sum(p[1] for p in pts) / len(pts)
     sxx = sum((p[0] - mx) ** 2 for p in pts)
     return sum((p[0] - mx) * (p[1] - my) for p in pts) / sxx if sxx > 0 else None
-
-
-def fmt(value, digits=1):
-    return "-" if value is None else f"{value:.{digits}f}"
 
 
 def report(results):

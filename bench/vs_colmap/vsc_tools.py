@@ -97,6 +97,32 @@ def largest_model(sparse_dir):
     return max(models, key=lambda m: m[0])[1], len(models)
 
 
+def num_models(sparse_dir):
+    """Model folders under sparse_dir (0 when it does not exist)."""
+    return sum(1 for p in sparse_dir.iterdir() if p.is_dir()) if sparse_dir.is_dir() else 0
+
+
+def eval_trajectory(loopsfm, estimate, groundtruth):
+    """`loopsfm eval --json` of a model folder or trajectory file, as frames scored, ATE (% of
+    the path), mean rotation error and largest loop gap; None when it fails."""
+    proc = subprocess.run([str(loopsfm), "eval", str(estimate), str(groundtruth), "--json"],
+                          capture_output=True, text=True)
+    if proc.returncode != 0:
+        log(f"eval of {estimate} failed: {proc.stderr.strip()}")
+        return None
+    m = json.loads(proc.stdout)
+    gaps = m.get("loop_gaps") or {}
+    return {"frames": m["num_matched"], "gt_frames": m["num_gt_frames"],
+            "ate_pct": 100.0 * m["ate_fraction_of_path"] if m.get("aligned") else None,
+            "rot_deg": m.get("rotation_error_mean_deg"),
+            "gap_max": gaps.get("max") if gaps.get("num_revisits") else None}
+
+
+def fmt(value, digits=1):
+    """A number for a Markdown table; "-" for None."""
+    return "-" if value is None else f"{value:.{digits}f}"
+
+
 def evaluate(args, sparse_dir, bench_set, log_path):
     """Scores the largest model in sparse_dir: its trajectory with `loopsfm eval --json`, its
     camera against the set's intrinsics.txt (vsc_camera.camera_vs_truth)."""
