@@ -88,8 +88,8 @@ struct BundleAdjustmentOptions {
   // Print Ceres' per-iteration progress to stdout (debugging only).
   bool print_progress = false;
 
-  // Defaults for the local bundle after each registration (fewer iterations, at most 8
-  // anchoring observations per point).
+  // Defaults for the local bundle after each registration (fewer iterations, at most 4
+  // anchoring observations per point, ended once the cameras have settled).
   static BundleAdjustmentOptions Local();
   // Defaults for the global bundle.
   static BundleAdjustmentOptions Global();
