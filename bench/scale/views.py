@@ -8,7 +8,7 @@ thesis' Figure 6.2, issue 39).
 
 The views are the first N frames of one extracted database (a `bench/scale/scale.py` walk:
 adaptive keyframes, so the frames stand at the same spacing whatever N is). For each N the
-script copies the database without the other frames and without any matches, runs
+script writes a database of those frames alone, without any matches, runs
 `loopsfm match --pairs STRATEGY` on it, and reads the stage's JSON report: pairs matched and
 verified, and the stage's time (loading the features included). `STRATEGY:MAX` runs that
 strategy up to MAX views only (exhaustive matching grows with the square of the views).
@@ -19,7 +19,6 @@ and writes WORKDIR/views.json. Standard library only.
 import argparse
 import json
 import math
-import shutil
 import sqlite3
 import sys
 from pathlib import Path
@@ -29,21 +28,30 @@ from vsc_tools import fmt, log, run_measured  # noqa: E402
 
 
 def subset_database(source, views, target):
-    """A copy of `source` holding its first `views` frames (lowest image ids) and no matches."""
-    shutil.copyfile(source, target)
+    """A database holding the first `views` frames of `source` (lowest image ids), with its
+    cameras and extraction records and no matches: built table by table, so a small subset of
+    a large database costs what the subset holds."""
+    if target.exists():
+        target.unlink()
     db = sqlite3.connect(target)
-    ids = [row[0] for row in db.execute("SELECT image_id FROM images ORDER BY image_id")]
+    db.execute("ATTACH DATABASE ? AS src", (str(source),))
+    ids = [row[0] for row in db.execute("SELECT image_id FROM src.images ORDER BY image_id")]
     if len(ids) < views:
         db.close()
         raise SystemExit(f"{source} holds {len(ids)} frames, fewer than the {views} asked for")
     last = ids[views - 1]
-    for table in ("keypoints", "descriptors", "loopsfm_frames", "images"):
-        db.execute(f"DELETE FROM {table} WHERE image_id > ?", (last,))
-    db.execute("DELETE FROM matches")
-    db.execute("DELETE FROM two_view_geometries")
-    db.execute("DELETE FROM loopsfm_meta WHERE key = 'match_fingerprint'")
+    schema = db.execute("SELECT type, name, sql FROM src.sqlite_master WHERE sql IS NOT NULL "
+                        "AND name NOT LIKE 'sqlite_%' ORDER BY type = 'index'").fetchall()
+    for kind, name, sql in schema:
+        db.execute(sql)
+        if kind != "table" or name in ("matches", "two_view_geometries"):
+            continue
+        columns = [row[1] for row in db.execute(f"PRAGMA src.table_info({name})")]
+        where = " WHERE image_id <= ?" if "image_id" in columns else ""
+        db.execute(f"INSERT INTO main.{name} SELECT * FROM src.{name}{where}",
+                   (last,) if where else ())
+    db.execute("DELETE FROM main.loopsfm_meta WHERE key = 'match_fingerprint'")
     db.commit()
-    db.execute("VACUUM")
     db.close()
 
 
