@@ -23,15 +23,14 @@ library only.
 
 import argparse
 import json
-import math
 import shutil
 import subprocess
 import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "vs_colmap"))
-from vsc_tools import (LOOPSFM_TIME, LOOPSFM_TOTAL, eval_trajectory, fmt, log,  # noqa: E402
-                       num_models, run_measured)
+from vsc_tools import (LOOPSFM_TIME, LOOPSFM_TOTAL, eval_trajectory,  # noqa: E402
+                       fit_exponent, fmt, log, num_models, run_measured)
 
 COMMON = ["--video", "--width", "640", "--height", "360", "--look-ahead", "20", "--shake", "1",
           "--jitter", "2", "--noise", "2", "--jpeg-quality", "80"]
@@ -94,17 +93,6 @@ def collect(args, size):
     return result
 
 
-def exponent(xs, ys):
-    """Least-squares slope of log y against log x; None with fewer than two usable points."""
-    pts = [(math.log(x), math.log(y)) for x, y in zip(xs, ys) if x and y and x > 0 and y > 0]
-    if len(pts) < 2:
-        return None
-    mx = sum(p[0] for p in pts) / len(pts)
-    my = sum(p[1] for p in pts) / len(pts)
-    sxx = sum((p[0] - mx) ** 2 for p in pts)
-    return sum((p[0] - mx) * (p[1] - my) for p in pts) / sxx if sxx > 0 else None
-
-
 def report(results):
     rows = ["| video frames | kept | models | mapped | extract s | match s | map s | total s | "
             "peak MiB | ATE % path | rot. deg | loop gap max |",
@@ -116,13 +104,13 @@ def report(results):
                     f"{fmt(r['total_s'])} | {fmt(r['peak_mib'], 0)} | {fmt(m.get('ate_pct'), 4)} | "
                     f"{fmt(m.get('rot_deg'), 3)} | {fmt(m.get('gap_max'), 4)} |")
     xs = [r["video_frames"] for r in results]
-    fits = {"total": exponent(xs, [r["total_s"] for r in results]),
-            "peak memory": exponent(xs, [r["peak_mib"] for r in results]),
-            "kept frames": exponent(xs, [r["kept"] for r in results])}
+    fits = {"total": fit_exponent(xs, [r["total_s"] for r in results]),
+            "peak memory": fit_exponent(xs, [r["peak_mib"] for r in results]),
+            "kept frames": fit_exponent(xs, [r["kept"] for r in results])}
     for stage in STAGES:
         times = [r["stages"].get(stage) for r in results]
         if max((t or 0) for t in times) >= 1.0:  # a stage that took no time has no growth
-            fits[stage] = exponent(xs, times)
+            fits[stage] = fit_exponent(xs, times)
     lines = ["", "Fitted exponents (quantity ~ video frames^k):"]
     lines += [f"- {name}: {fmt(k, 2)}" for name, k in fits.items() if k is not None]
     return "\n".join(rows + lines), fits

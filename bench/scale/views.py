@@ -18,13 +18,12 @@ and writes WORKDIR/views.json. Standard library only.
 
 import argparse
 import json
-import math
 import sqlite3
 import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "vs_colmap"))
-from vsc_tools import fmt, log, run_measured  # noqa: E402
+from vsc_tools import fit_exponent, fmt, log, run_measured  # noqa: E402
 
 
 def subset_database(source, views, target):
@@ -53,16 +52,6 @@ def subset_database(source, views, target):
     db.execute("DELETE FROM main.loopsfm_meta WHERE key = 'match_fingerprint'")
     db.commit()
     db.close()
-
-
-def fit_exponent(xs, ys):
-    points = [(math.log(x), math.log(y)) for x, y in zip(xs, ys) if x > 0 and y and y > 0]
-    if len(points) < 2:
-        return None
-    mx = sum(p[0] for p in points) / len(points)
-    my = sum(p[1] for p in points) / len(points)
-    sxx = sum((p[0] - mx) ** 2 for p in points)
-    return sum((p[0] - mx) * (p[1] - my) for p in points) / sxx if sxx > 0 else None
 
 
 def main():

@@ -2,6 +2,7 @@
 COLMAP's mapper on loopsfm's database. Standard library only; see README.md beside this file."""
 
 import json
+import math
 import os
 import re
 import shutil
@@ -116,6 +117,18 @@ def eval_trajectory(loopsfm, estimate, groundtruth):
             "ate_pct": 100.0 * m["ate_fraction_of_path"] if m.get("aligned") else None,
             "rot_deg": m.get("rotation_error_mean_deg"),
             "gap_max": gaps.get("max") if gaps.get("num_revisits") else None}
+
+
+def fit_exponent(xs, ys):
+    """k of y ~ x^k: least-squares slope of log y against log x; None with fewer than two
+    usable points."""
+    pts = [(math.log(x), math.log(y)) for x, y in zip(xs, ys) if x and y and x > 0 and y > 0]
+    if len(pts) < 2:
+        return None
+    mx = sum(p[0] for p in pts) / len(pts)
+    my = sum(p[1] for p in pts) / len(pts)
+    sxx = sum((p[0] - mx) ** 2 for p in pts)
+    return sum((p[0] - mx) * (p[1] - my) for p in pts) / sxx if sxx > 0 else None
 
 
 def fmt(value, digits=1):

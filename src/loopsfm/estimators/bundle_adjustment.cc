@@ -156,9 +156,8 @@ BundleAdjustmentOptions BundleAdjustmentOptions::Global() {
   // path (and, after a loop, near the places it returns to), so the reduced camera system
   // stays sparse past COLMAP's 1,000 images, the bound chosen for unordered photo
   // collections, and sparse Schur takes fewer and cheaper iterations than iterative Schur.
-  // Its factor grows faster than the problem, though: measured on rendered walks, the two
-  // cost the same per iteration near 2,000 frames, and beyond it sparse Schur only costs
-  // memory (docs/scale).
+  // Its factor grows faster than the problem, though, and past this bound it costs memory
+  // without saving time (docs/scale).
   options.sparse_schur_max_num_images = 2000;
   return options;
 }
