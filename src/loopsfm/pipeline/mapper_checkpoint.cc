@@ -15,7 +15,7 @@ namespace fs = std::filesystem;
 namespace {
 
 constexpr char kMagic[] = "loopsfm mapper checkpoint\n";
-constexpr uint32_t kVersion = 3;
+constexpr uint32_t kVersion = 4;
 
 // FNV-1a over the bytes of what mapping reads.
 class Digest {
@@ -85,8 +85,8 @@ nlohmann::json OptionsJson(const IncrementalMapperOptions& o) {
                         o.registration_neighbour_window}},
       {"structure", {o.max_reproj_error_px, o.min_tri_angle_deg}},
       {"bundles", {o.local_ba_num_images, o.global_ba_growth, o.global_ba_end_margin,
-                   RefinementJson(o.refine_unknown), RefinementJson(o.refine_known),
-                   o.focal_prior_sigma_log}},
+                   o.global_ba_window, RefinementJson(o.refine_unknown),
+                   RefinementJson(o.refine_known), o.focal_prior_sigma_log}},
       {"models", {o.max_num_models, o.min_model_size, o.merge_max_reproj_error_px,
                   o.merge_min_num_inliers, o.merge_min_inlier_ratio}},
       {"loop_closure",
@@ -388,6 +388,7 @@ nlohmann::json HeaderJson(const MapperCheckpoint& c, const nlohmann::json& finge
       {"failed_at", c.failed_at},
       {"ever_failed", c.ever_failed},
       {"last_global_size", c.last_global_size},
+      {"recent_frames", c.recent_frames},
       {"refined_since_stall", c.refined_since_stall},
       {"tried_initial_pairs", tried},
       {"random_state", c.random_state},
@@ -408,6 +409,7 @@ MapperCheckpoint CheckpointFromHeader(const nlohmann::json& j) {
   }
   c.ever_failed = GetInts<image_t>(j.at("ever_failed"));
   c.last_global_size = GetInt<uint64_t>(j.at("last_global_size"));
+  c.recent_frames = GetInts<image_t>(j.at("recent_frames"));
   c.refined_since_stall = j.at("refined_since_stall").get<bool>();
   for (const char t : j.at("tried_initial_pairs").get<std::string>()) {
     c.tried_initial_pairs.push_back(t == '1' ? 1 : 0);

@@ -66,6 +66,9 @@ TEST_F(MapperCheckpointFileTest, ResumingFromTheFileGivesTheUninterruptedResult)
   EXPECT_EQ(read->NumRegistered(), saved.NumRegistered());
   EXPECT_EQ(read->random_state, saved.random_state);
   EXPECT_EQ(read->tried_initial_pairs, saved.tried_initial_pairs);
+  EXPECT_EQ(read->last_global_size, saved.last_global_size);
+  EXPECT_FALSE(saved.recent_frames.empty());
+  EXPECT_EQ(read->recent_frames, saved.recent_frames);
   EXPECT_EQ(read->report.num_local_ba, saved.report.num_local_ba);
   EXPECT_EQ(read->report.seconds_local_ba, saved.report.seconds_local_ba);
 
@@ -177,6 +180,7 @@ TEST_F(MapperCheckpointFileTest, HeaderNumbersOutOfRangeAreSetAside) {
   for (const auto& [key, value] : {std::pair<std::string, nlohmann::json>{"loop_cooldown", 1e300},
                                    {"loop_cooldown", 2.5},
                                    {"last_global_size", -1},
+                                   {"recent_frames", {-3}},
                                    {"loop_window", {4294967296ull}}}) {
     nlohmann::json changed = header;
     changed[key] = value;

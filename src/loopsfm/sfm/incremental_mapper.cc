@@ -79,6 +79,9 @@ void IncrementalMapperOptions::Check() const {
   LOOPSFM_REQUIRE_OPTION(local_ba_num_images >= 1, "local bundle needs at least one image");
   LOOPSFM_REQUIRE_OPTION(global_ba_growth > 0, "global bundle growth must be positive");
   LOOPSFM_REQUIRE_OPTION(global_ba_end_margin >= 0, "global bundle end margin must be 0 or more");
+  LOOPSFM_REQUIRE_OPTION(global_ba_window == 0 || global_ba_window >= 20,
+                         "global bundle window must be 0 (off) or at least 20 frames, got {}",
+                         global_ba_window);
   LOOPSFM_REQUIRE_OPTION(registration_capture_window >= 0 && registration_neighbour_window >= 0,
                          "registration capture and neighbour windows must be >= 0, got {} and {}",
                          registration_capture_window, registration_neighbour_window);
@@ -187,6 +190,7 @@ class IncrementalMapper {
       checkpoint.ever_failed.assign(growth_.ever_failed.begin(), growth_.ever_failed.end());
       std::sort(checkpoint.ever_failed.begin(), checkpoint.ever_failed.end());
       checkpoint.last_global_size = growth_.last_global_size;
+      checkpoint.recent_frames = growth_.recent;
       checkpoint.refined_since_stall = growth_.refined_since_stall;
     }
     checkpoint.tried_initial_pairs = tried_;
@@ -233,6 +237,7 @@ class IncrementalMapper {
       growth_.ever_failed.clear();
       growth_.ever_failed.insert(checkpoint.ever_failed.begin(), checkpoint.ever_failed.end());
       growth_.last_global_size = checkpoint.last_global_size;
+      growth_.recent = checkpoint.recent_frames;
       growth_.refined_since_stall = checkpoint.refined_since_stall;
       resume_growth_ = true;
     }
@@ -326,9 +331,9 @@ class IncrementalMapper {
   }
 
   void GrowUntilStalled(ModelPtr& model) {
-    if (!resume_growth_) growth_ = {{}, {}, model->reconstruction().NumRegImages(), false};
+    if (!resume_growth_) growth_ = {{}, {}, model->reconstruction().NumRegImages(), {}, false};
     resume_growth_ = false;
-    auto& [failed_at, ever_failed, last_global_size, refined_since_stall] = growth_;
+    auto& [failed_at, ever_failed, last_global_size, recent, refined_since_stall] = growth_;
     while (true) {
       MaybeSaveCheckpoint(*model);
       Reconstruction& rec = model->reconstruction();
@@ -365,14 +370,24 @@ class IncrementalMapper {
         ++report_.num_registered;
         failed_at.erase(image_id);
         if (ever_failed.erase(image_id)) ++report_.num_registered_on_retry;
+        if (options_.global_ba_window > 0) {
+          recent.push_back(image_id);
+          if (recent.size() > static_cast<size_t>(options_.global_ba_window)) {
+            recent.erase(recent.begin());
+          }
+        }
         if (options_.loop_closure.CloseWhileMapping() &&
             loop_closer_.AfterRegistration(*model, image_id, &report_)) {
           // Closing ended with a global refinement.
           last_global_size = rec.NumRegImages();
           failed_at.clear();
-        } else if (rec.NumRegImages() >= last_global_size * (1.0 + options_.global_ba_growth) &&
-                   !GrowthEndsSoon(rec)) {
-          model->GlobalRefinement(&report_);
+        } else if (RefinementDue(rec.NumRegImages(), last_global_size) && !GrowthEndsSoon(rec)) {
+          if (options_.global_ba_window > 0 &&
+              rec.NumRegImages() > static_cast<size_t>(options_.global_ba_window)) {
+            model->WindowRefinement(recent, &report_);
+          } else {
+            model->GlobalRefinement(&report_);
+          }
           last_global_size = rec.NumRegImages();
           failed_at.clear();
         }
@@ -397,6 +412,14 @@ class IncrementalMapper {
       failed_at.clear();
       refined_since_stall = true;
     }
+  }
+
+  // Whether a model grown to `now` frames since its last refinement at `last` frames is due
+  // another: by the growth fraction, and at least every half window of new frames.
+  bool RefinementDue(size_t now, size_t last) const {
+    double step = options_.global_ba_growth * static_cast<double>(last);
+    if (options_.global_ba_window > 0) step = std::min(step, options_.global_ba_window / 2.0);
+    return static_cast<double>(now) >= static_cast<double>(last) + step;
   }
 
   // Whether the frames not in `rec` are few enough that the global bundle ending its growth
@@ -434,6 +457,8 @@ class IncrementalMapper {
     // Frames that failed at least once (for the report; failed_at is cleared on refinement).
     std::unordered_set<image_t> ever_failed;
     size_t last_global_size = 0;
+    // The frames registered most recently, oldest first (at most global_ba_window).
+    std::vector<image_t> recent;
     bool refined_since_stall = false;
   };
 

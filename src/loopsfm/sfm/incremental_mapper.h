@@ -171,6 +171,15 @@ struct IncrementalMapperOptions {
   // lands near the end (drift2, loops closed while mapping: 598 then 599 frames, 45.9 + 31.7
   // s of a 310 s mapping). 0: never skip.
   double global_ba_end_margin = 0.1;
+  // Growth-triggered global bundles of a video model larger than this many frames are
+  // windowed: only the frames registered most recently (this many) move, with the points
+  // they observe; the frames behind them stay fixed and anchor those points, and the cameras'
+  // intrinsics stay as they are. What is far behind the camera changes little until a loop
+  // closes, and a full bundle of the whole model after every growth step costs more with
+  // every lap. Such a bundle comes after every half window of new frames (or the growth
+  // fraction, whichever is fewer), so each frame moves in two of them. Loop closings,
+  // merges and the end of growth still refine the whole model. 0: always the whole model.
+  int global_ba_window = 300;
   // What global bundle adjustments refine of cameras without a prior focal length (guessed
   // or self-calibrated), and of cameras with known intrinsics (--intrinsics). Local bundles
   // hold every camera fixed. Focal lengths are refined once a model has 5 frames, the

@@ -28,11 +28,13 @@ struct MapperCheckpoint {
   // The model being grown, and where its growth stood.
   std::optional<Model> growing;
   // Frames that failed to register (with the visible track count then) and frames that
-  // failed at least once; the size at the last global refinement; whether the model was
-  // refined since it last stalled.
+  // failed at least once; the size at the last global refinement (whole or windowed); the
+  // frames registered most recently, oldest first (IncrementalMapperOptions::
+  // global_ba_window); whether the model was refined since it last stalled.
   std::vector<std::pair<image_t, uint64_t>> failed_at;
   std::vector<image_t> ever_failed;
   uint64_t last_global_size = 0;
+  std::vector<image_t> recent_frames;
   bool refined_since_stall = false;
   // Initial pair candidates tried so far (RankInitialPairs order).
   std::vector<char> tried_initial_pairs;

@@ -113,15 +113,24 @@ class MapperState {
     std::function<void(BundleAdjuster&)> add_terms;
     // Only these points' observations enter (BundleAdjustmentConfig::RestrictToPoints).
     std::optional<std::unordered_set<point3D_t>> points;
+    // Only these frames move, with the points they observe; the other frames stay fixed
+    // where they observe those points (and hold the gauge), and so do the cameras'
+    // intrinsics. Not set, or every registered frame: the whole model.
+    std::optional<std::vector<image_t>> frames;
     // Replace BundleAdjustmentOptions::Global()'s settle and function tolerances.
     std::optional<double> settle_tolerance;
     std::optional<double> function_tolerance;
   };
-  // Bundle over all registered frames. Returns false when the solver failed.
+  // Bundle over all registered frames (or scope.frames). Returns false when the solver failed.
   bool GlobalBundle(MapperReport* report, const GlobalBundleScope& scope = {});
   // Global bundle, re-triangulation and merging of all tracks, filtering, and a second
   // bundle when those changed much (both bundles with `settle_tolerance` when set).
   void GlobalRefinement(MapperReport* report, std::optional<double> settle_tolerance = {});
+  // The same over a window of frames (the most recently registered of a growing model):
+  // a bundle that moves only them (GlobalBundleScope::frames), then their tracks
+  // re-triangulated and merged and their points filtered, and a second bundle when those
+  // changed much. Its cost follows the window, not the model.
+  void WindowRefinement(const std::vector<image_t>& frames, MapperReport* report);
   // Global refinement after a correction moved the cameras far from the bundle's optimum
   // (a loop closed by the pose graph): first a bundle over the longest tracks only, then
   // the other points re-triangulated from the moved cameras, then GlobalRefinement ending
@@ -146,6 +155,12 @@ class MapperState {
  private:
   // The frame whose centre holds the scale in global bundles: the one farthest from gauge1_.
   image_t ScaleGaugeImage() const;
+  // A whole-model bundle's cameras: constant, or refined as options_ ask (by the model's size).
+  void SetIntrinsicsRefinement(BundleAdjustmentConfig* config,
+                               BundleAdjustmentOptions* ba_options) const;
+  // Priors holding self-calibrated or guessed focal lengths near their start
+  // (focal_prior_sigma_log); sets the adjuster up.
+  void AddFocalPriors(const BundleAdjustmentConfig& config, BundleAdjuster& adjuster);
   // Triangulates, extends or merges one track; returns observations added.
   size_t TriangulateTrack(int track);
   // Starts new points from observations of a track that fit none of its points.

@@ -181,10 +181,13 @@ bool MapperState::LocalBundle(image_t image_id, MapperReport* report) {
   for (const auto& [id, camera] : reconstruction_.Cameras()) config.SetConstantCamera(id);
   BundleAdjustmentOptions ba_options = BundleAdjustmentOptions::Local();
   ba_options.num_threads = options_.num_threads > 0 ? options_.num_threads : -1;
-  BundleAdjuster adjuster(ba_options, config);
-  const bool ok = ReportSolve(adjuster, &reconstruction_, "local", report);
-  report->num_local_ba_iterations += adjuster.report().num_iterations;
-  report->num_local_ba_residuals += adjuster.report().num_residual_blocks;
+  bool ok = false;
+  {  // the problem is torn down within the step's time
+    BundleAdjuster adjuster(ba_options, config);
+    ok = ReportSolve(adjuster, &reconstruction_, "local", report);
+    report->num_local_ba_iterations += adjuster.report().num_iterations;
+    report->num_local_ba_residuals += adjuster.report().num_residual_blocks;
+  }
   // Points of the local frames may have moved: check them.
   std::vector<point3D_t> touched;
   for (image_t id : config.ImageIds()) {
@@ -203,13 +206,53 @@ bool MapperState::LocalBundle(image_t image_id, MapperReport* report) {
 bool MapperState::GlobalBundle(MapperReport* report, const GlobalBundleScope& scope) {
   Timer timer;
   BundleAdjustmentConfig config;
-  for (image_t id : reconstruction_.RegImageIds()) config.AddImage(id);
-  FixGaugeWithTwoImages(reconstruction_, gauge1_, ScaleGaugeImage(), &config);
+  if (scope.frames) {
+    for (image_t id : *scope.frames) {
+      if (reconstruction_.IsRegistered(id)) config.AddImage(id);
+    }
+  } else {
+    for (image_t id : reconstruction_.RegImageIds()) config.AddImage(id);
+  }
+  // A window's fixed frames hold the gauge.
+  const bool whole = config.NumImages() == reconstruction_.NumRegImages();
+  if (whole) FixGaugeWithTwoImages(reconstruction_, gauge1_, ScaleGaugeImage(), &config);
   if (scope.points) config.RestrictToPoints(*scope.points);
   BundleAdjustmentOptions ba_options = BundleAdjustmentOptions::Global();
   ba_options.num_threads = options_.num_threads > 0 ? options_.num_threads : -1;
   if (scope.settle_tolerance) ba_options.settle_tolerance = *scope.settle_tolerance;
   if (scope.function_tolerance) ba_options.function_tolerance = *scope.function_tolerance;
+  if (whole) {
+    SetIntrinsicsRefinement(&config, &ba_options);
+  } else {
+    for (const auto& [id, camera] : reconstruction_.Cameras()) config.SetConstantCamera(id);
+  }
+  bool ok = false;
+  {  // the problem is torn down within the step's time
+    BundleAdjuster adjuster(ba_options, config);
+    if (ba_options.refine_focal_length) AddFocalPriors(config, adjuster);
+    if (scope.add_terms) {
+      if (!adjuster.IsSetUp()) adjuster.SetUp(&reconstruction_);
+      scope.add_terms(adjuster);
+    }
+    ok = ReportSolve(adjuster, &reconstruction_, "global", report);
+    const BundleAdjustmentReport& solved = adjuster.report();
+    spdlog::debug("{} bundle: {} frames, {} points, {} residual blocks, {} iterations{}, cost "
+                  "{:.6g} -> {:.6g}, {:.1f} s (residuals {:.1f} s, Jacobians {:.1f} s, {} {:.1f} s)",
+                  whole ? "global" : "window", solved.num_variable_images,
+                  solved.num_variable_points, solved.num_residual_blocks, solved.num_iterations,
+                  solved.settled ? " (cameras settled)" : "", solved.initial_cost,
+                  solved.final_cost, timer.ElapsedSeconds(), solved.residual_time_s,
+                  solved.jacobian_time_s, solved.linear_solver, solved.linear_solver_time_s);
+    report->num_global_ba_iterations += solved.num_iterations;
+    report->num_global_ba_residuals += solved.num_residual_blocks;
+  }
+  ++report->num_global_ba;
+  report->seconds_global_ba += timer.ElapsedSeconds();
+  return ok;
+}
+
+void MapperState::SetIntrinsicsRefinement(BundleAdjustmentConfig* config,
+                                          BundleAdjustmentOptions* ba_options) const {
   // A camera's parameters are refined by what its kind of intrinsics asks for, and only
   // once the model has enough frames to constrain them.
   const size_t num_frames = reconstruction_.NumRegImages();
@@ -220,49 +263,32 @@ bool MapperState::GlobalBundle(MapperReport* report, const GlobalBundleScope& sc
     const bool pp = asked.principal_point && num_frames >= 10;
     const bool distortion = asked.distortion && num_frames >= 10;
     if (!focal && !pp && !distortion) {
-      config.SetConstantCamera(id);
+      config->SetConstantCamera(id);
       continue;
     }
     // One set of refine flags serves every variable camera; both kinds of camera in one model
     // with different requests is not supported (the flags set both alike).
-    ba_options.refine_focal_length |= focal;
-    ba_options.refine_principal_point |= pp;
-    ba_options.refine_extra_params |= distortion;
+    ba_options->refine_focal_length |= focal;
+    ba_options->refine_principal_point |= pp;
+    ba_options->refine_extra_params |= distortion;
   }
-  BundleAdjuster adjuster(ba_options, config);
-  if (ba_options.refine_focal_length && options_.focal_prior_sigma_log > 0) {
-    adjuster.SetUp(&reconstruction_);
-    for (const Camera& start : input_.cameras) {
-      if (start.has_prior_focal_length || config.HasConstantCamera(start.camera_id) ||
-          !reconstruction_.ExistsCamera(start.camera_id)) {
-        continue;
-      }
-      Camera& camera = reconstruction_.GetCamera(start.camera_id);
-      if (!adjuster.problem().HasParameterBlock(camera.params.data())) continue;
-      adjuster.problem().AddResidualBlock(
-          new FocalPriorCost(static_cast<int>(camera.params.size()), start.MeanFocalLength(),
-                             options_.focal_prior_sigma_log),
-          nullptr, camera.params.data());
+}
+
+void MapperState::AddFocalPriors(const BundleAdjustmentConfig& config, BundleAdjuster& adjuster) {
+  if (options_.focal_prior_sigma_log <= 0) return;
+  adjuster.SetUp(&reconstruction_);
+  for (const Camera& start : input_.cameras) {
+    if (start.has_prior_focal_length || config.HasConstantCamera(start.camera_id) ||
+        !reconstruction_.ExistsCamera(start.camera_id)) {
+      continue;
     }
+    Camera& camera = reconstruction_.GetCamera(start.camera_id);
+    if (!adjuster.problem().HasParameterBlock(camera.params.data())) continue;
+    adjuster.problem().AddResidualBlock(
+        new FocalPriorCost(static_cast<int>(camera.params.size()), start.MeanFocalLength(),
+                           options_.focal_prior_sigma_log),
+        nullptr, camera.params.data());
   }
-  if (scope.add_terms) {
-    if (!adjuster.IsSetUp()) adjuster.SetUp(&reconstruction_);
-    scope.add_terms(adjuster);
-  }
-  const bool ok = ReportSolve(adjuster, &reconstruction_, "global", report);
-  const BundleAdjustmentReport& solved = adjuster.report();
-  spdlog::debug("global bundle: {} frames, {} points, {} residual blocks, {} iterations{}, cost "
-                "{:.6g} -> {:.6g}, {:.1f} s (residuals {:.1f} s, Jacobians {:.1f} s, {} {:.1f} s)",
-                solved.num_variable_images, solved.num_variable_points,
-                solved.num_residual_blocks, solved.num_iterations,
-                solved.settled ? " (cameras settled)" : "", solved.initial_cost,
-                solved.final_cost, timer.ElapsedSeconds(), solved.residual_time_s,
-                solved.jacobian_time_s, solved.linear_solver, solved.linear_solver_time_s);
-  report->num_global_ba_iterations += adjuster.report().num_iterations;
-  report->num_global_ba_residuals += adjuster.report().num_residual_blocks;
-  ++report->num_global_ba;
-  report->seconds_global_ba += timer.ElapsedSeconds();
-  return ok;
 }
 
 image_t MapperState::ScaleGaugeImage() const {
@@ -277,12 +303,58 @@ void MapperState::GlobalRefinement(MapperReport* report,
   GlobalBundle(report, scope);
   Timer tri_timer;
   const size_t added = RetriangulateAll();
-  report->seconds_triangulation += tri_timer.ElapsedSeconds();
   const size_t removed = FilterPoints({});
+  report->seconds_triangulation += tri_timer.ElapsedSeconds();
   const size_t observations = reconstruction_.ComputeNumObservations();
   if (added + removed > 0.02 * observations) {
     GlobalBundle(report, scope);
+    tri_timer.Restart();
     FilterPoints({});
+    report->seconds_triangulation += tri_timer.ElapsedSeconds();
+  }
+}
+
+void MapperState::WindowRefinement(const std::vector<image_t>& frames, MapperReport* report) {
+  const GlobalBundleScope scope{.frames = frames};
+  GlobalBundle(report, scope);
+  Timer tri_timer;
+  std::vector<int> tracks;
+  for (image_t id : frames) {
+    if (!reconstruction_.IsRegistered(id)) continue;
+    for (int track : track_of_.at(id)) {
+      if (track >= 0) tracks.push_back(track);
+    }
+  }
+  std::sort(tracks.begin(), tracks.end());
+  tracks.erase(std::unique(tracks.begin(), tracks.end()), tracks.end());
+  size_t added = 0;
+  for (int track : tracks) {
+    added += TriangulateTrack(track);
+    MergePointsOfTrack(track);
+  }
+  // The window's points, and how many observations its frames have.
+  auto window_points = [&](size_t* observations) {
+    std::vector<point3D_t> points;
+    for (image_t id : frames) {
+      if (!reconstruction_.IsRegistered(id)) continue;
+      for (const Point2D& p : reconstruction_.GetImage(id).points2D) {
+        if (p.HasPoint3D()) points.push_back(p.point3D_id);
+      }
+    }
+    if (observations) *observations = points.size();
+    std::sort(points.begin(), points.end());
+    points.erase(std::unique(points.begin(), points.end()), points.end());
+    return points;
+  };
+  const size_t removed = FilterPoints(window_points(nullptr));
+  size_t observations = 0;
+  const std::vector<point3D_t> points = window_points(&observations);
+  report->seconds_triangulation += tri_timer.ElapsedSeconds();
+  if (added + removed > 0.02 * observations) {
+    GlobalBundle(report, scope);
+    tri_timer.Restart();
+    FilterPoints(points);
+    report->seconds_triangulation += tri_timer.ElapsedSeconds();
   }
 }
 
