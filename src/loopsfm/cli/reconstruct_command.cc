@@ -73,9 +73,10 @@ void PrintSummary(const ReconstructReport& report) {
   }
   const MapperReport& m = report.mapper;
   out += fmt::format("{:<28}registration {:.1f} s, triangulation {:.1f} s, {} local BA {:.1f} s, "
-                     "{} global BA {:.1f} s, merging {:.1f} s\n",
+                     "{} global BA {:.1f} s, merging {:.1f} s, checkpoints {:.1f} s\n",
                      "  of which", m.seconds_registration, m.seconds_triangulation, m.num_local_ba,
-                     m.seconds_local_ba, m.num_global_ba, m.seconds_global_ba, m.seconds_merging);
+                     m.seconds_local_ba, m.num_global_ba, m.seconds_global_ba, m.seconds_merging,
+                     m.seconds_checkpoints);
   auto per = [](long long total, int count) { return count > 0 ? double(total) / count : 0.0; };
   out += fmt::format("{:<28}local BA {:.1f} iterations, {:.0f} residuals; global BA {:.1f} "
                      "iterations, {:.0f} residuals (means)\n",

@@ -306,7 +306,7 @@ nlohmann::json ReportJson(const MapperReport& r) {
                   r.num_split_groups, r.num_split_groups_refused, r.num_split_pairs}},
       {"seconds", {r.seconds_registration, r.seconds_triangulation, r.seconds_local_ba,
                    r.seconds_global_ba, r.seconds_merging, r.seconds_loop_detection,
-                   r.seconds_loop_closing, r.seconds_split}},
+                   r.seconds_loop_closing, r.seconds_split, r.seconds_checkpoints}},
       {"loops_closed", loops},
       {"path_before_loop_closing", path},
       {"loop_links", links},
@@ -338,7 +338,7 @@ MapperReport ReportFromJson(const nlohmann::json& j) {
   k = 0;
   for (double* field : {&r.seconds_registration, &r.seconds_triangulation, &r.seconds_local_ba,
                         &r.seconds_global_ba, &r.seconds_merging, &r.seconds_loop_detection,
-                        &r.seconds_loop_closing, &r.seconds_split}) {
+                        &r.seconds_loop_closing, &r.seconds_split, &r.seconds_checkpoints}) {
     *field = s.at(k++).get<double>();
   }
   for (const nlohmann::json& l : j.at("loops_closed")) {

@@ -155,7 +155,11 @@ class IncrementalMapper {
         Random split_random(options_.seed + 2);
         CloseLoopsBySplitTracks(*models_[0], options_.loop_closure, split_random, &report_);
       }
-      if (checkpointing_.save) checkpointing_.save(Save(nullptr, /*finished=*/true));
+      if (checkpointing_.save) {
+        Timer timer;
+        checkpointing_.save(Save(nullptr, /*finished=*/true));
+        report_.seconds_checkpoints += timer.ElapsedSeconds();  // after: not in the saved one
+      }
     }
     std::vector<Reconstruction> result;
     for (ModelPtr& model : models_) {
@@ -255,7 +259,9 @@ class IncrementalMapper {
         last_checkpoint_.ElapsedSeconds() < checkpointing_.interval_seconds) {
       return;
     }
+    Timer timer;
     checkpointing_.save(Save(&growing, /*finished=*/false));
+    report_.seconds_checkpoints += timer.ElapsedSeconds();
     last_checkpoint_.Restart();
   }
 
@@ -337,6 +343,7 @@ class IncrementalMapper {
     while (true) {
       MaybeSaveCheckpoint(*model);
       Reconstruction& rec = model->reconstruction();
+      Timer ranking;  // choosing the next frame is part of registering it
       std::vector<std::tuple<bool, size_t, image_t>> order;
       for (const auto& [id, count] : model->CountVisibleTracks()) {
         if (count < static_cast<size_t>(options_.abs_pose_min_num_inliers)) continue;
@@ -350,6 +357,7 @@ class IncrementalMapper {
             {model->NearRegisteredFrame(id, options_.registration_capture_window), count, id});
       }
       std::sort(order.begin(), order.end(), std::greater<>());
+      report_.seconds_registration += ranking.ElapsedSeconds();
       bool registered = false;
       for (const auto& [near, count, image_id] : order) {
         if (!model->RegisterImage(image_id, random_, &report_)) {

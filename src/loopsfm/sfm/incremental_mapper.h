@@ -267,6 +267,8 @@ struct MapperReport {
   double seconds_local_ba = 0.0;
   double seconds_global_ba = 0.0;
   double seconds_merging = 0.0;
+  // Handing the mapper's state to MapperCheckpointing::save (copied and written).
+  double seconds_checkpoints = 0.0;
   // Loops closed while mapping, and windows of consistent evidence refused as implausible
   // drift (too large a correction).
   std::vector<ClosedLoop> loops_closed;

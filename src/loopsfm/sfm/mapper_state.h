@@ -114,8 +114,9 @@ class MapperState {
     // Only these points' observations enter (BundleAdjustmentConfig::RestrictToPoints).
     std::optional<std::unordered_set<point3D_t>> points;
     // Only these frames move, with the points they observe; the other frames stay fixed
-    // where they observe those points (and hold the gauge), and so do the cameras'
-    // intrinsics. Not set, or every registered frame: the whole model.
+    // where they observe those points (at most 4 observations a point, as in local bundles)
+    // and hold the gauge, and the cameras' intrinsics stay fixed. Not set, or every
+    // registered frame: the whole model.
     std::optional<std::vector<image_t>> frames;
     // Replace BundleAdjustmentOptions::Global()'s settle and function tolerances.
     std::optional<double> settle_tolerance;

@@ -225,6 +225,10 @@ bool MapperState::GlobalBundle(MapperReport* report, const GlobalBundleScope& sc
     SetIntrinsicsRefinement(&config, &ba_options);
   } else {
     for (const auto& [id, camera] : reconstruction_.Cameras()) config.SetConstantCamera(id);
+    // As in local bundles: a point seen on every lap of a walk would otherwise bring its
+    // observations from all the earlier laps, and the window's bundle would grow with them.
+    ba_options.max_constant_observations_per_point =
+        BundleAdjustmentOptions::Local().max_constant_observations_per_point;
   }
   bool ok = false;
   {  // the problem is torn down within the step's time
