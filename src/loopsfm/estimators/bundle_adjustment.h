@@ -3,7 +3,8 @@
 // camera intrinsics by minimising robustified reprojection errors.
 //
 // The mapper uses it twice: a local bundle over the newest images after each registration
-// (few iterations) and a global bundle whenever the model has grown by a set fraction. Loop
+// (few iterations) and a global bundle whenever the model has grown by a set fraction (over
+// a window of its most recent frames once it is large, the rest held constant). Loop
 // closing adds its own terms (point distances, relative poses) to the same problem:
 //
 //   BundleAdjuster adjuster(options, config);

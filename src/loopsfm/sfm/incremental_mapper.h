@@ -9,7 +9,8 @@
 //   pose refinement), tracks triangulated as soon as two registered frames see them (a
 //   track may hold several points, see mapper_state.h), local bundle adjustment after each
 //   registration and global bundle adjustment (with re-triangulation, point merging and
-//   filtering) whenever the model has grown by a set fraction. A frame that fails to
+//   filtering) whenever the model has grown by a set fraction; past global_ba_window
+//   frames, only the most recent frames move in those bundles. A frame that fails to
 //   register is tried again once the model sees more of it or after a global bundle.
 // - Several models: frames no model can take start a new one. A model may register frames
 //   of an earlier one; models linked by such shared frames or by common tracks are merged
