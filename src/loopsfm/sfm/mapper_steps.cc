@@ -145,6 +145,24 @@ void FixGauge(const Reconstruction& reconstruction, image_t gauge1, image_t gaug
   }
 }
 
+// The 3D points the registered ones of `frames` observe, each once; `observations` gets
+// how many observations of points those frames have.
+template <typename Frames>
+std::vector<point3D_t> PointsSeenBy(const Reconstruction& reconstruction, const Frames& frames,
+                                    size_t* observations = nullptr) {
+  std::vector<point3D_t> points;
+  for (image_t id : frames) {
+    if (!reconstruction.IsRegistered(id)) continue;
+    for (const Point2D& p : reconstruction.GetImage(id).points2D) {
+      if (p.HasPoint3D()) points.push_back(p.point3D_id);
+    }
+  }
+  if (observations) *observations = points.size();
+  std::sort(points.begin(), points.end());
+  points.erase(std::unique(points.begin(), points.end()), points.end());
+  return points;
+}
+
 // Ceres copies the solution into the parameter blocks only when it is usable (solver.cc:
 // StateVectorToParameterBlocks of the original state otherwise), so a failed solve leaves
 // the model as it was.
@@ -189,15 +207,7 @@ bool MapperState::LocalBundle(image_t image_id, MapperReport* report) {
     report->num_local_ba_residuals += adjuster.report().num_residual_blocks;
   }
   // Points of the local frames may have moved: check them.
-  std::vector<point3D_t> touched;
-  for (image_t id : config.ImageIds()) {
-    for (const Point2D& p : reconstruction_.GetImage(id).points2D) {
-      if (p.HasPoint3D()) touched.push_back(p.point3D_id);
-    }
-  }
-  std::sort(touched.begin(), touched.end());
-  touched.erase(std::unique(touched.begin(), touched.end()), touched.end());
-  FilterPoints(touched);
+  FilterPoints(PointsSeenBy(reconstruction_, config.ImageIds()));
   ++report->num_local_ba;
   report->seconds_local_ba += timer.ElapsedSeconds();
   return ok;
@@ -336,23 +346,9 @@ void MapperState::WindowRefinement(const std::vector<image_t>& frames, MapperRep
     added += TriangulateTrack(track);
     MergePointsOfTrack(track);
   }
-  // The window's points, and how many observations its frames have.
-  auto window_points = [&](size_t* observations) {
-    std::vector<point3D_t> points;
-    for (image_t id : frames) {
-      if (!reconstruction_.IsRegistered(id)) continue;
-      for (const Point2D& p : reconstruction_.GetImage(id).points2D) {
-        if (p.HasPoint3D()) points.push_back(p.point3D_id);
-      }
-    }
-    if (observations) *observations = points.size();
-    std::sort(points.begin(), points.end());
-    points.erase(std::unique(points.begin(), points.end()), points.end());
-    return points;
-  };
-  const size_t removed = FilterPoints(window_points(nullptr));
+  const size_t removed = FilterPoints(PointsSeenBy(reconstruction_, frames));
   size_t observations = 0;
-  const std::vector<point3D_t> points = window_points(&observations);
+  const std::vector<point3D_t> points = PointsSeenBy(reconstruction_, frames, &observations);
   report->seconds_triangulation += tri_timer.ElapsedSeconds();
   if (added + removed > 0.02 * observations) {
     GlobalBundle(report, scope);
