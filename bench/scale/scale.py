@@ -3,7 +3,7 @@
 5k and 10k frames at the same density, end to end, with time and peak memory per stage,
 fitted exponents, and accuracy against ground truth at each size.
 
-    bench/scale/scale.py render --workdir DIR [--sizes 1k,2k,5k,10k]
+    bench/scale/scale.py render --workdir DIR [--sizes 1k,2k,5k,10k | 1k-avenue,...]
     bench/scale/scale.py run --workdir DIR [--sizes ...] [--loopsfm build/loopsfm]
         [-- EXTRA RECONSTRUCT FLAGS]
     bench/scale/scale.py report --workdir DIR [--sizes ...]
@@ -11,10 +11,14 @@ fitted exponents, and accuracy against ground truth at each size.
 `render` writes DIR/<size>/video.mp4 and groundtruth.txt with `loopsfm synth street`: 30 fps,
 about 0.1 m a frame (a brisk walk), hand-held shake (1 degree) and jitter (2 cm), sensor
 noise, JPEG, the view turned 20 degrees ahead. 1k and 2k walk one and two laps round a
-block, 5k two and a half laps of a figure eight round two blocks, 10k five laps: every size
-returns to places it has seen (loops to close). `run` reconstructs each with default flags
-(self-calibrated, adaptive keyframes), one after the other, scores it with `loopsfm eval`,
-prints a Markdown table and the fitted exponents (time ~ frames^k by least squares on
+block, 5k two and a half laps of a figure eight round two blocks, 10k five laps: every one
+of these default sizes returns to places it has seen (loops to close). The avenue sizes,
+rendered and run only when --sizes names them (1k-avenue, 2k-avenue, 5k-avenue, 10k-avenue),
+walk as far at the same density straight along a row of blocks and never come back: how
+mapping grows with the length of a walk without laps over the same facades (give them a DIR
+of their own: the table and the fits go by frame count). `run` reconstructs each with default
+flags (self-calibrated, adaptive keyframes), one after the other, scores it with `loopsfm
+eval`, prints a Markdown table and the fitted exponents (time ~ frames^k by least squares on
 log-log), and writes DIR/scale.json; sizes run earlier into DIR with the same flags stay in the
 table, so the sizes can be run one at a time. `report` rebuilds the table from the logs and
 outputs of earlier runs (the peak memory then from loopsfm's own report line). Standard
@@ -40,6 +44,10 @@ SCENES = {
     "5k": ["--frames", "5000", "--route", "figure8", "--laps", "2", "--revisit", "0.5"],
     "10k": ["--frames", "10000", "--route", "figure8", "--laps", "5", "--revisit", "0"],
 }
+DEFAULT_SIZES = tuple(SCENES)
+# Optional: walks as long as the default sizes' that never revisit a place.
+SCENES.update({f"{k}k-avenue": ["--frames", str(1000 * k), "--route", "avenue", "--laps", str(k),
+                                "--revisit", "0"] for k in (1, 2, 5, 10)})
 STAGES = ("extract", "match", "fill-in", "map", "localise")
 
 
@@ -124,7 +132,9 @@ def main(argv):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("action", choices=("render", "run", "report"))
     parser.add_argument("--workdir", type=Path, required=True)
-    parser.add_argument("--sizes", default=",".join(SCENES))
+    parser.add_argument("--sizes", default=",".join(DEFAULT_SIZES),
+                        help=f"comma-separated, from {', '.join(SCENES)} "
+                             f"(default {','.join(DEFAULT_SIZES)})")
     parser.add_argument("--loopsfm", type=Path,
                         default=Path(__file__).resolve().parents[2] / "build" / "loopsfm")
     args = parser.parse_args(argv)

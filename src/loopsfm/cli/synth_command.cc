@@ -85,8 +85,10 @@ void AddSynthCommand(CLI::App& app) {
 
   // The street walk.
   cmd->add_option("--route", options->street_route,
-                  "Street: block (around one block) | figure8 (around two blocks) | pan (standing "
-                  "still, the view turns 120 degrees on the spot: no baseline)")
+                  "Street: block (around one block) | figure8 (around two blocks) | avenue "
+                  "(straight along a row of blocks, never coming back; --laps and --revisit set "
+                  "its length, in loops around a block) | pan (standing still, the view turns "
+                  "120 degrees on the spot: no baseline)")
       ->capture_default_str();
   cmd->add_option("--laps", options->street_laps, "Street: full laps of the route")
       ->capture_default_str();

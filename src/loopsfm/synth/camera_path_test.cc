@@ -61,6 +61,19 @@ SynthOptions TurnOptions(const std::string& route) {
   return options;
 }
 
+// `laps` laps of the route and no revisit, in `frames` small frames.
+SynthOptions WalkOptions(const std::string& route, int laps, int frames) {
+  SynthOptions options;
+  options.scene = "street";
+  options.street_route = route;
+  options.street_laps = laps;
+  options.street_revisit_fraction = 0.0;
+  options.num_frames = frames;
+  options.width = 160;
+  options.height = 120;
+  return options;
+}
+
 double PathLength(const SyntheticScene& scene) {
   double length = 0.0;
   for (int i = 0; i + 1 < scene.NumFrames(); ++i) {
@@ -186,14 +199,8 @@ TEST(StreetScene, EveryFrameOfTheTurningWalkSeesBuildingsNearby) {
 // The figure-eight goes round both blocks, walks the street between them once per loop, and
 // the second lap revisits the first.
 TEST(StreetScene, FigureEightWalksAroundBothBlocksAndRevisits) {
-  SynthOptions options;
-  options.scene = "street";
-  options.street_route = "figure8";
-  options.street_laps = 2;
-  options.street_revisit_fraction = 0.0;
-  options.num_frames = 1001;  // frame i + 500 is where frame i was, a lap later
-  options.width = 160;
-  options.height = 120;
+  // Frame i + 500 is where frame i was, a lap later.
+  const SynthOptions options = WalkOptions("figure8", 2, 1001);
   const SyntheticScene scene = MakeScene(options);
   EXPECT_NEAR(PathLength(scene), 4.0 * kLoopLength, 0.01 * kLoopLength);
   EXPECT_EQ(scene.num_block_buildings, 12);
@@ -240,6 +247,70 @@ TEST(StreetScene, LapsAndRevisitSetTheLengthOfTheWalk) {
   EXPECT_NEAR(end.y(), -6.0 + s, 1e-9);
 }
 
+// The avenue walks straight east along the south side of a row of blocks, 6 m from their south
+// faces, filming them with the view turned ahead, and never comes back. It is laps loops around
+// a block long, and starts as the block walk does: in the middle of block A's south side,
+// looking the same way.
+TEST(StreetScene, AvenueWalksStraightAlongARowOfBlocksAndNeverComesBack) {
+  // About 0.1 m a frame, as the 1k walk round a block.
+  SynthOptions options = WalkOptions("avenue", 3, 3001);
+  options.street_look_ahead_degrees = 20.0;
+  const SyntheticScene scene = MakeScene(options);
+  const double length = 3.0 * kLoopLength;
+  const double spacing = length / (scene.NumFrames() - 1);
+  EXPECT_NEAR(PathLength(scene), length, 1e-9 * length);
+  // East at a constant spacing, on the line y = -12 at eye height, one heading throughout.
+  double worst_x = 0.0, worst_yz = 0.0, worst_heading = 0.0;
+  for (int i = 0; i < scene.NumFrames(); ++i) {
+    const Rigid3d& pose = scene.world_from_cam[i];
+    worst_x = std::max(worst_x, std::abs(pose.translation.x() - i * spacing));
+    worst_yz =
+        std::max(worst_yz, (pose.translation.tail<2>() - Eigen::Vector2d(-12.0, 1.6)).norm());
+    worst_heading = std::max(worst_heading, std::abs(Heading(pose) - 70.0));
+  }
+  EXPECT_LT(worst_x, 1e-9);
+  EXPECT_LT(worst_yz, 1e-12);
+  EXPECT_LT(worst_heading, 1e-9);
+  // No revisits: once 10 m on, the walk never comes within 10 m of where it was.
+  const int steps_in_10m = static_cast<int>(std::ceil(10.0 / spacing));
+  double nearest = 1e9;
+  for (int i = 0; i < scene.NumFrames(); ++i) {
+    for (int j = 0; j + steps_in_10m <= i; ++j) {
+      nearest = std::min(
+          nearest,
+          (scene.world_from_cam[i].translation - scene.world_from_cam[j].translation).norm());
+    }
+  }
+  EXPECT_GE(nearest, 10.0 - 1e-9);
+
+  // Six buildings a block, one block every 36 m: the walk ends at x = 305 m, in the street
+  // after block 8 (x from 278 to 298), and block 9 stands ahead. Each block's south face is
+  // at y = -6, 6 m north of the walk, its buildings set back up to 1.2 m.
+  ASSERT_EQ(scene.num_block_buildings, 6 * 10);
+  for (int block = 0; block < 10; ++block) {
+    SCOPED_TRACE("block " + std::to_string(block));
+    double south = 1e9;
+    for (int k = 6 * block; k < 6 * block + 6; ++k) {
+      const TexturedBox& box = scene.world.boxes[k];
+      EXPECT_GE(box.min.x(), 36.0 * block - 10.0 - 1e-9);
+      EXPECT_LE(box.max.x(), 36.0 * block + 10.0 + 1e-9);
+      south = std::min(south, box.min.y());
+    }
+    EXPECT_GE(south - -12.0, 6.0 - 1e-9);
+    EXPECT_LE(south - -12.0, 7.2 + 1e-9);
+  }
+
+  // The block walk of the same length and frames is the same walk along A's south side.
+  options.street_route = "block";
+  const SyntheticScene block = MakeScene(options);
+  for (int i = 0; i * spacing < 10.0 - 1e-6; ++i) {
+    EXPECT_LT((block.world_from_cam[i].translation - scene.world_from_cam[i].translation).norm(),
+              1e-12) << "frame " << i;
+    EXPECT_LT(RotationAngleDegrees(block.world_from_cam[i].rotation.inverse() *
+                                   scene.world_from_cam[i].rotation),
+              1e-6) << "frame " << i;
+  }
+}
 
 TEST(StreetScene, PanTurnsOnTheSpotFromLeftToRight) {
   SynthOptions options;

@@ -1,12 +1,15 @@
 #include "loopsfm/synth/render.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <fstream>
+#include <limits>
 #include <optional>
 #include <system_error>
 #include <vector>
 
+#include <Eigen/Geometry>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/videoio.hpp>
 #include <tbb/blocked_range.h>
@@ -115,7 +118,65 @@ std::string OpenVideo(const std::filesystem::path& path, const SynthOptions& opt
       path.string()));
 }
 
+// Bounds of x / z and y / z (camera axes) over the rays through all points of the image, a
+// little wider; nullopt where the lens gives no finite bounds. The lens maps the image
+// rectangle continuously and one-to-one, so the extremes lie on the image of its border: that
+// is sampled every half pixel, and the bounds are widened by the largest step between two
+// samples.
+std::optional<Eigen::AlignedBox2d> ImageRayBounds(const Camera& camera) {
+  const double w = camera.width, h = camera.height;
+  const std::array<Eigen::Vector2d, 5> corners = {Eigen::Vector2d(0.0, 0.0),
+                                                  Eigen::Vector2d(w, 0.0), Eigen::Vector2d(w, h),
+                                                  Eigen::Vector2d(0.0, h),
+                                                  Eigen::Vector2d(0.0, 0.0)};
+  Eigen::AlignedBox2d bounds;
+  double step = 0.0;
+  Eigen::Vector2d last = camera.CamFromImg(corners[0]);
+  for (int edge = 0; edge < 4; ++edge) {
+    const Eigen::Vector2d from = corners[edge], to = corners[edge + 1];
+    const int samples = static_cast<int>(std::ceil(2.0 * (to - from).norm()));
+    for (int k = 1; k <= samples; ++k) {
+      const Eigen::Vector2d point =
+          camera.CamFromImg(from + (to - from) * (static_cast<double>(k) / samples));
+      if (!point.allFinite()) return std::nullopt;
+      bounds.extend(point);
+      step = std::max(step, (point - last).norm());
+      last = point;
+    }
+  }
+  const Eigen::Vector2d margin = Eigen::Vector2d::Constant(2.0 * step + 1e-9);
+  return Eigen::AlignedBox2d(bounds.min() - margin, bounds.max() + margin);
+}
+
 }  // namespace
+
+SyntheticWorld WorldInView(const SyntheticScene& scene, int frame) {
+  LOOPSFM_CHECK(frame >= 0 && frame < scene.NumFrames());
+  const std::optional<Eigen::AlignedBox2d> bounds = ImageRayBounds(scene.camera);
+  if (!bounds) return scene.world;
+  // The rays are t (x, y, 1) in camera axes with t > 0 and (x, y) inside the bounds: the
+  // pyramid where these four are >= 0. A box whose corners all lie outside one of its faces
+  // lies wholly outside it.
+  const Eigen::Vector2d lo = bounds->min(), hi = bounds->max();
+  auto inside = [&](const Eigen::Vector3d& q) {
+    return Eigen::Vector4d(q.x() - lo.x() * q.z(), hi.x() * q.z() - q.x(),
+                           q.y() - lo.y() * q.z(), hi.y() * q.z() - q.y());
+  };
+  const Rigid3d cam_from_world = scene.world_from_cam[frame].Inverse();
+  SyntheticWorld world = scene.world;
+  world.boxes.clear();
+  for (const TexturedBox& box : scene.world.boxes) {
+    Eigen::Vector4d most = Eigen::Vector4d::Constant(-std::numeric_limits<double>::infinity());
+    for (int corner = 0; corner < 8; ++corner) {
+      const Eigen::Vector3d p(corner & 1 ? box.max.x() : box.min.x(),
+                              corner & 2 ? box.max.y() : box.min.y(),
+                              corner & 4 ? box.max.z() : box.min.z());
+      most = most.cwiseMax(inside(cam_from_world * p));
+    }
+    if ((most.array() >= 0.0).all()) world.boxes.push_back(box);
+  }
+  return world;
+}
 
 cv::Mat RenderFrame(const SyntheticScene& scene, int frame) {
   LOOPSFM_CHECK(frame >= 0 && frame < scene.NumFrames());
@@ -123,6 +184,9 @@ cv::Mat RenderFrame(const SyntheticScene& scene, int frame) {
   const int width = camera.width, height = camera.height;
   const int n = scene.options.supersampling;
   const Rigid3d& world_from_cam = scene.world_from_cam[frame];
+  // Only the boxes the frame can see: the surfaces hit are the same, at a cost that does not
+  // grow with the boxes out of view (a long street).
+  const SyntheticWorld world = WorldInView(scene, frame);
   const Eigen::Matrix3d rotation = world_from_cam.rotation.toRotationMatrix();
   const Eigen::Vector3d center = world_from_cam.translation;
   const double pixel_angle = 1.0 / camera.MeanFocalLength();
@@ -138,9 +202,9 @@ cv::Mat RenderFrame(const SyntheticScene& scene, int frame) {
     for (int row = rows.begin(); row < rows.end(); ++row) {
       for (int col = 0; col < width; ++col) {
         const Eigen::Vector3d ray = direction(col + 0.5, row + 0.5);
-        const std::optional<SurfaceHit> hit = scene.world.CastRay(center, ray);
+        const std::optional<SurfaceHit> hit = world.CastRay(center, ray);
         centres[static_cast<size_t>(row) * width + col] =
-            CentreSample::From(hit, scene.world.Shade(hit, ray, pixel_angle));
+            CentreSample::From(hit, world.Shade(hit, ray, pixel_angle));
       }
     }
   });
@@ -168,7 +232,7 @@ cv::Mat RenderFrame(const SyntheticScene& scene, int frame) {
           for (int sy = 0; sy < n; ++sy) {
             for (int sx = 0; sx < n; ++sx) {
               const Eigen::Vector3d ray = direction(col + (sx + 0.5) / n, row + (sy + 0.5) / n);
-              rgb += scene.world.Radiance(center, ray, pixel_angle);
+              rgb += world.Radiance(center, ray, pixel_angle);
             }
           }
           rgb /= n * n;

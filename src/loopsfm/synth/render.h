@@ -18,8 +18,14 @@
 
 namespace loopsfm {
 
+// The scene's world without the boxes no ray through the image of `frame` can hit (those
+// wholly outside the pyramid of its rays); the other boxes keep their order, so every ray of
+// the frame hits the same surface as in the whole world (box indices aside).
+SyntheticWorld WorldInView(const SyntheticScene& scene, int frame);
+
 // Renders one frame as an 8-bit BGR image of the camera's size. Rows are rendered in
-// parallel (TBB); the result does not depend on the thread count.
+// parallel (TBB); the result does not depend on the thread count. Only the boxes of
+// WorldInView are tested, so the cost does not grow with the boxes out of view.
 cv::Mat RenderFrame(const SyntheticScene& scene, int frame);
 
 // RenderFrame with the degradations of scene.options.degradation that cover the frame (motion

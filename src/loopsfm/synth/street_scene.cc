@@ -6,8 +6,12 @@
 // around block B, A's mirror image across the street east of A, clockwise: that street is
 // 2 * kStreetStandoff wide, so the loops around A and B share its centre line, walked north
 // in both. The camera films the block it walks around, so at the two corners where the route
-// passes from one loop to the other the view swings the other way to the path. The "pan"
-// route does not walk: the camera stands where the walk would start and turns on the spot.
+// passes from one loop to the other the view swings the other way to the path. The "avenue"
+// route never comes back: it walks straight east along the south side of a row of blocks
+// shaped like A, one every 2 * kBlockHalfX + kStreetWidth with cross streets between them,
+// kStreetStandoff from their south faces, filming them; as many blocks as the walk needs and
+// one more ahead. The "pan" route does not walk: the camera stands where the walk would start
+// and turns on the spot.
 
 #include <algorithm>
 #include <array>
@@ -253,6 +257,12 @@ void StreetRoutePoint(const SynthOptions& options, double u, Eigen::Vector2d* po
     *view = Rotate(start.inward, (0.5 - u) * kPanDegrees * M_PI / 180.0);
     return;
   }
+  if (options.street_route == "avenue") {
+    // Along the south side of the row of blocks, where the loop around A walks its south side.
+    *position = Eigen::Vector2d(u - kBlockHalfX, -kBlockHalfY - kStreetStandoff);
+    *view = Rotate(Eigen::Vector2d::UnitY(), -look_ahead);
+    return;
+  }
   if (options.street_route == "block") {
     const LoopPoint point = StreetLoopPoint(u);
     *position = point.position;
@@ -282,6 +292,7 @@ void StreetRoutePoint(const SynthOptions& options, double u, Eigen::Vector2d* po
 void BuildStreetScene(const SynthOptions& options, SyntheticScene* scene) {
   SyntheticWorld& world = scene->world;
   const bool figure8 = options.street_route == "figure8";
+  const bool avenue = options.street_route == "avenue";
   Random rng(options.seed);
   Material asphalt;
   asphalt.seed = rng.Engine()();
@@ -292,35 +303,51 @@ void BuildStreetScene(const SynthOptions& options, SyntheticScene* scene) {
   world.materials.push_back(asphalt);
   world.ground = GroundPlane{0.0, 0};
 
-  // The blocks walked around: buildings first, then pillars in front of them.
-  const Eigen::Vector2d block_a = Eigen::Vector2d::Zero();
-  const Eigen::Vector2d block_b(2.0 * kMirrorX, 0.0);
-  const auto add_buildings =
-      options.street_repeated_facades ? AddRepeatedBlockBuildings : AddBlockBuildings;
-  add_buildings(block_a, &rng, &world);
-  if (figure8) add_buildings(block_b, &rng, &world);
-  scene->num_block_buildings = static_cast<int>(world.boxes.size());
-  AddPillars(block_a, &rng, &world);
-  if (figure8) AddPillars(block_b, &rng, &world);
-
-  // The neighbouring blocks across the streets, one building each, seen in the background
-  // where the camera looks past a corner: a ring of blocks around A (or around A and B).
   const double pitch_x = 2.0 * kBlockHalfX + kStreetWidth;
   const double pitch_y = 2.0 * kBlockHalfY + kStreetWidth;
-  for (int bx = -1; bx <= (figure8 ? 2 : 1); ++bx) {
-    for (int by = -1; by <= 1; ++by) {
-      if ((bx == 0 || (figure8 && bx == 1)) && by == 0) continue;
-      // Columns 0 and 1 are A's and B's; column 2 lies one street east of B.
-      double x = bx * pitch_x;
-      if (figure8 && bx >= 1) x = block_b.x() + (bx - 1) * pitch_x;
-      AddNeighbour(Eigen::Vector2d(x, by * pitch_y), &rng, &world);
-    }
-  }
-
   const double perimeter =
       4.0 * (kBlockHalfX + kBlockHalfY) + 2.0 * M_PI * kStreetStandoff;
   const double route = figure8 ? 2.0 * perimeter : perimeter;
   const double length = route * (options.street_laps + options.street_revisit_fraction);
+
+  // The blocks walked around (or along): buildings first, then pillars in front of them.
+  std::vector<Eigen::Vector2d> blocks = {Eigen::Vector2d::Zero()};
+  if (figure8) blocks.emplace_back(2.0 * kMirrorX, 0.0);
+  if (avenue) {
+    // Every block whose south face the walk passes (from the middle of the first, `length`
+    // metres east), and one more ahead.
+    const int count = static_cast<int>(std::ceil((length + kBlockHalfX) / pitch_x)) + 1;
+    for (int k = 1; k < count; ++k) blocks.emplace_back(k * pitch_x, 0.0);
+  }
+  const auto add_buildings =
+      options.street_repeated_facades ? AddRepeatedBlockBuildings : AddBlockBuildings;
+  for (const Eigen::Vector2d& block : blocks) add_buildings(block, &rng, &world);
+  scene->num_block_buildings = static_cast<int>(world.boxes.size());
+  for (const Eigen::Vector2d& block : blocks) AddPillars(block, &rng, &world);
+
+  if (avenue) {
+    // The neighbouring blocks, one building each: a row north of the avenue's blocks, seen
+    // through the cross streets, and a row across the avenue, both a block longer at each end.
+    const int count = static_cast<int>(blocks.size());
+    for (int bx = -1; bx <= count; ++bx) {
+      for (const double y : {-pitch_y, pitch_y}) {
+        AddNeighbour(Eigen::Vector2d(bx * pitch_x, y), &rng, &world);
+      }
+    }
+  } else {
+    // The neighbouring blocks across the streets, one building each, seen in the background
+    // where the camera looks past a corner: a ring of blocks around A (or around A and B).
+    for (int bx = -1; bx <= (figure8 ? 2 : 1); ++bx) {
+      for (int by = -1; by <= 1; ++by) {
+        if ((bx == 0 || (figure8 && bx == 1)) && by == 0) continue;
+        // Columns 0 and 1 are A's and B's; column 2 lies one street east of B.
+        double x = bx * pitch_x;
+        if (figure8 && bx >= 1) x = blocks[1].x() + (bx - 1) * pitch_x;
+        AddNeighbour(Eigen::Vector2d(x, by * pitch_y), &rng, &world);
+      }
+    }
+  }
+
   const double pitch = kStreetPitchDegrees * M_PI / 180.0;
   for (int i = 0; i < options.num_frames; ++i) {
     // Start in the middle of the south side of block A.

@@ -160,12 +160,15 @@ void SynthOptions::Check() const {
   LOOPSFM_REQUIRE_OPTION(street_laps + street_revisit_fraction > 0.0,
                          "a street walk needs --laps 1 or more or a --revisit fraction above 0");
   LOOPSFM_REQUIRE_OPTION(
-      street_route == "block" || street_route == "figure8" || street_route == "pan",
-      "unknown street route '{}'; use 'block', 'figure8' or 'pan'", street_route);
+      street_route == "block" || street_route == "figure8" || street_route == "avenue" ||
+          street_route == "pan",
+      "unknown street route '{}'; use 'block', 'figure8', 'avenue' or 'pan'", street_route);
   LOOPSFM_REQUIRE_OPTION(street_route != "pan" || (street_look_ahead_degrees == 0.0 &&
                                                    !street_abrupt_turns),
                          "the pan route turns on the spot: street_look_ahead_degrees and "
                          "street_abrupt_turns do not apply to it");
+  LOOPSFM_REQUIRE_OPTION(street_route != "avenue" || !street_abrupt_turns,
+                         "the avenue route is straight: street_abrupt_turns does not apply to it");
   LOOPSFM_REQUIRE_OPTION(street_look_ahead_degrees >= 0.0 && street_look_ahead_degrees <= 60.0,
                          "street_look_ahead_degrees must be in [0, 60], got {}",
                          street_look_ahead_degrees);

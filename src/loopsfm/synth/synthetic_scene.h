@@ -11,7 +11,8 @@
 //             walks around the block 6 m from it, looking sideways at the facades, and at the
 //             end walks the first 10% of the loop again. Options make the walk harder: more
 //             laps, a figure-eight around two blocks, a view turned ahead, headings that jump
-//             by 90 degrees at the corners, hand-held shake (see SynthOptions).
+//             by 90 degrees at the corners, hand-held shake (see SynthOptions); or the
+//             camera walks straight along a row of blocks and never comes back (an avenue).
 //
 // Frame degradations (noise, motion blur, haze, dark frames, JPEG) are applied to the
 // rendered frames (frame_degradation.h); the poses are not affected by them. The lens may
@@ -65,9 +66,12 @@ struct SynthOptions {
   // texture anchored at each building's corner), so places far apart look the same.
   bool street_repeated_facades = false;
   // Street scene: "block" (around one block, counter-clockwise), "figure8" (around block A
-  // counter-clockwise, then around its neighbour B clockwise, filming the block walked around)
-  // or "pan" (no walk: standing in front of block A, the view turns 120 degrees on the spot,
-  // left to right; laps and revisit do not apply).
+  // counter-clockwise, then around its neighbour B clockwise, filming the block walked around),
+  // "avenue" (straight east along the south side of a row of blocks like A with cross streets
+  // between them, filming them, never coming back: laps and revisit only set the length, laps
+  // + revisit times the loop around one block; no corners, so no abrupt turns) or "pan" (no
+  // walk: standing in front of block A, the view turns 120 degrees on the spot, left to right;
+  // laps and revisit do not apply).
   std::string street_route = "block";
   // Street scene: the view turned from the facade towards the walking direction, in degrees.
   double street_look_ahead_degrees = 0.0;
@@ -102,7 +106,8 @@ struct SyntheticScene {
   std::vector<Rigid3d> world_from_cam;
   SyntheticWorld world;
   // Street: world.boxes[0, num_block_buildings) are the buildings of the blocks the camera
-  // walks around (then come pillars in front of them and the blocks across the streets).
+  // walks around or along (then come pillars in front of them and the blocks across the
+  // streets).
   int num_block_buildings = 0;
 
   int NumFrames() const { return static_cast<int>(world_from_cam.size()); }
