@@ -384,5 +384,19 @@ TEST_F(CliSyntheticTest, SequentialPairsLeaveTheLoopOpenVocabTreeClosesIt) {
   EXPECT_LE(best_loop_pair_inliers(database), 2 * loop_inliers);
 }
 
+// The build links mimalloc where libmimalloc-dev is installed (docs/scale: the mapping's bundles
+// run faster in its heap). The binary says which allocator actually serves malloc, so a link
+// that leaves glibc's malloc in charge fails here.
+TEST(CliVersion, NamesTheAllocatorThatServesMalloc) {
+  const CommandResult result = RunLoopsfm({"--version"});
+  ASSERT_EQ(result.exit_code, 0) << result;
+#ifdef LOOPSFM_EXPECT_MIMALLOC
+  EXPECT_NE(result.output.find("memory allocator: mimalloc 2."), std::string::npos) << result;
+#else
+  EXPECT_NE(result.output.find("memory allocator: the C library's malloc"), std::string::npos)
+      << result;
+#endif
+}
+
 }  // namespace
 }  // namespace loopsfm::e2e

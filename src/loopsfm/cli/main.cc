@@ -1,13 +1,38 @@
 // loopsfm: camera path and sparse 3D structure from video.
 
 #include <cstdio>
+#include <cstdlib>
+#include <string>
 
 #include <CLI/CLI.hpp>
+#include <fmt/format.h>
 #include <glog/logging.h>
+#ifdef LOOPSFM_WITH_MIMALLOC
+#include <mimalloc.h>
+#endif
 
 #include "loopsfm/cli/commands.h"
 #include "loopsfm/util/errors.h"
 #include "loopsfm/util/logging.h"
+
+namespace {
+
+// The allocator that serves malloc in this process: mimalloc where the build linked it and it
+// does stand in for the C library's malloc (linked ahead of libc), else the C library's.
+std::string AllocatorName() {
+#ifdef LOOPSFM_WITH_MIMALLOC
+  void* probe = std::malloc(64);
+  const bool mimalloc_serves = mi_is_in_heap_region(probe);
+  std::free(probe);
+  if (mimalloc_serves) {
+    const int version = mi_version();  // 209 for 2.0.9
+    return fmt::format("mimalloc {}.{}.{}", version / 100, version / 10 % 10, version % 10);
+  }
+#endif
+  return "the C library's malloc";
+}
+
+}  // namespace
 
 int main(int argc, char** argv) {
   using namespace loopsfm;
@@ -18,7 +43,8 @@ int main(int argc, char** argv) {
   app.require_subcommand(1);
   // --threads, -v and -q work after the subcommand too (`loopsfm reconstruct ... -q`).
   app.fallthrough();
-  app.set_version_flag("--version", "loopsfm 0.1.0");
+  app.set_version_flag("--version", fmt::format("loopsfm 0.1.0 (memory allocator: {})",
+                                                AllocatorName()));
   auto& common = cli::Common();
   app.add_option("--threads", common.threads, "Worker threads (0: all cores)")->capture_default_str();
   app.add_flag("-v,--verbose", common.verbose, "More log output");
