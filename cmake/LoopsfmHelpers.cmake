@@ -36,3 +36,16 @@ function(loopsfm_add_test name)
   set_tests_properties(${name} PROPERTIES LABELS "${ARG_LABELS}" TIMEOUT ${ARG_TIMEOUT}
     WORKING_DIRECTORY ${PROJECT_BINARY_DIR})
 endfunction()
+
+# loopsfm_link_allocator(TARGET)
+#   Links TARGET with the allocator the build chose (CMakeLists.txt: mimalloc, or none) and
+#   defines LOOPSFM_WITH_MIMALLOC for its sources. Linked ahead of libc, mimalloc's malloc and
+#   free serve the whole process (Ceres, OpenCV, TBB), even where TARGET calls none of its
+#   functions, so the link must not be dropped as unneeded.
+function(loopsfm_link_allocator target)
+  if(loopsfm_allocator STREQUAL "mimalloc")
+    target_link_libraries(${target} PRIVATE -Wl,--push-state,--no-as-needed mimalloc
+                          -Wl,--pop-state)
+    target_compile_definitions(${target} PRIVATE LOOPSFM_WITH_MIMALLOC)
+  endif()
+endfunction()
