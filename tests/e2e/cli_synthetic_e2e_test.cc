@@ -223,6 +223,33 @@ TEST_F(CliSyntheticTest, EvalJsonAgreesWithTheLibrary) {
   expect_same("rotation_error_max_deg", metrics.rotation_error_max_deg);
 }
 
+// `eval --rpe-step N` scores the relative poses of ground-truth frames N apart, as the library
+// does with that step, in the text and in the JSON.
+TEST_F(CliSyntheticTest, EvalRelativePoseErrorAtAGivenStep) {
+  const std::string base = ShellQuote(LoopsfmBinary().string()) + " eval " +
+                           ShellQuote(Model0().string()) + " " +
+                           ShellQuote((run_->scene / "groundtruth.txt").string()) +
+                           " --rpe-step 5";
+  TrajectoryEvalOptions options;
+  options.rpe_step = 5;
+  const TrajectoryMetrics metrics =
+      EvaluateTrajectory(ReadColmapModel(Model0()), GroundTruth(), options);
+  ASSERT_TRUE(metrics.rpe && metrics.rpe->num_pairs > 0);
+  const CommandResult json_run = RunShell(base + " --json 2>/dev/null");
+  ASSERT_EQ(json_run.exit_code, 0) << json_run;
+  const nlohmann::json rpe = nlohmann::json::parse(json_run.output).at("rpe");
+  EXPECT_EQ(rpe.at("step").get<int>(), 5);
+  EXPECT_EQ(rpe.at("num_pairs").get<size_t>(), metrics.rpe->num_pairs);
+  EXPECT_NEAR(rpe.at("rotation_mean_deg").get<double>(), metrics.rpe->rotation_mean_deg, 1e-9);
+  const CommandResult text = RunShell(base);
+  ASSERT_EQ(text.exit_code, 0) << text;
+  EXPECT_NE(text.output.find("relative pose error " + std::to_string(metrics.rpe->num_pairs) +
+                             " pairs 5 frames apart"),
+            std::string::npos)
+      << text;
+  EXPECT_EQ(RunShell(base + " --rpe-step -1").exit_code, 2);
+}
+
 // Loop closing is on by default, so the run lists the frames it tied together (none need
 // tying on this render: the file may hold only its header). `eval --plot-links` draws such
 // links between the model's frames, and refuses links that join none of them.

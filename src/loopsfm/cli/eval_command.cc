@@ -96,6 +96,7 @@ void AddEvalCommand(CLI::App& app) {
   struct Flags {
     std::string model, groundtruth;
     bool json = false;
+    int rpe_step = TrajectoryEvalOptions().rpe_step;
     std::string plot, plot_also, plot_links;
   };
   auto flags = std::make_shared<Flags>();
@@ -108,6 +109,13 @@ void AddEvalCommand(CLI::App& app) {
                   "Ground truth: 'name tx ty tz qx qy qz qw' per line, camera-to-world")
       ->required();
   cmd->add_flag("--json", flags->json, "Print the metrics as JSON");
+  cmd->add_option("--rpe-step", flags->rpe_step,
+                  "Relative pose error between ground-truth frames this many apart (0: none). "
+                  "It needs no alignment: a step as long as the video gives the drift from end "
+                  "to end, which the rotation error cannot show on a straight walk (its "
+                  "alignment, fitted to the camera centres, leaves the roll about the line "
+                  "undetermined)")
+      ->capture_default_str();
   cmd->add_option("--plot", flags->plot,
                   "Also write a top view (PNG) of the ground truth and the model's path aligned "
                   "to it, with the largest loop gap marked");
@@ -119,6 +127,11 @@ void AddEvalCommand(CLI::App& app) {
                   "loop_links.txt of the run that wrote the model) as lines between them")
       ->check(CLI::ExistingFile);
   cmd->callback([flags] {
+    if (flags->rpe_step < 0) {
+      throw InvalidArgument(fmt::format(
+          "--rpe-step must be a number of frames, or 0 for no relative pose error (got {})",
+          flags->rpe_step));
+    }
     const auto ground_truth = ReadTrajectoryFile(flags->groundtruth);
     if (!flags->plot_also.empty() && flags->plot.empty()) {
       throw InvalidArgument("--plot-also needs --plot FILE.png (the view to draw it in)");
@@ -128,10 +141,12 @@ void AddEvalCommand(CLI::App& app) {
     }
     const std::vector<LoopLink> links =
         flags->plot_links.empty() ? std::vector<LoopLink>() : ReadLoopLinksFile(flags->plot_links);
+    TrajectoryEvalOptions options;
+    options.rpe_step = flags->rpe_step;
     auto evaluate = [&](const std::string& model) {
       return std::filesystem::is_directory(model)
-                 ? EvaluateTrajectory(ReadColmapModel(model), ground_truth)
-                 : EvaluateTrajectory(ReadTrajectoryFile(model), ground_truth);
+                 ? EvaluateTrajectory(ReadColmapModel(model), ground_truth, options)
+                 : EvaluateTrajectory(ReadTrajectoryFile(model), ground_truth, options);
     };
     const TrajectoryMetrics metrics = evaluate(flags->model);
     if (!flags->plot.empty()) {
@@ -158,6 +173,14 @@ void AddEvalCommand(CLI::App& app) {
                          100.0 * metrics.ate_fraction_of_path, metrics.gt_path_length);
       out += fmt::format("rotation error      mean {:.3f} deg, max {:.3f} deg\n",
                          metrics.rotation_error_mean_deg, metrics.rotation_error_max_deg);
+      if (metrics.rpe && metrics.rpe->num_pairs > 0) {
+        const RelativePoseErrors& rpe = *metrics.rpe;
+        out += fmt::format(
+            "relative pose error {} pairs {} frames apart: translation RMSE {:.6g}, rotation "
+            "mean {:.3f} deg, max {:.3f} deg\n",
+            rpe.num_pairs, rpe.step, rpe.translation_rmse, rpe.rotation_mean_deg,
+            rpe.rotation_max_deg);
+      }
       const LoopGaps& gaps = *metrics.loop_gaps;
       if (gaps.num_revisits == 0) {
         out += fmt::format(
