@@ -173,6 +173,14 @@ void AddEvalCommand(CLI::App& app) {
                          100.0 * metrics.ate_fraction_of_path, metrics.gt_path_length);
       out += fmt::format("rotation error      mean {:.3f} deg, max {:.3f} deg\n",
                          metrics.rotation_error_mean_deg, metrics.rotation_error_max_deg);
+      if (metrics.alignment_roll_uncertainty_deg > 1e-3 &&
+          metrics.alignment_roll_uncertainty_deg >= 0.5 * metrics.rotation_error_mean_deg) {
+        out += fmt::format(
+            "                    (the centres nearly on a line leave the alignment's roll about "
+            "it uncertain by {:.3f} deg, which the rotation error includes; --rpe-step N with a "
+            "long step measures the drift without it)\n",
+            metrics.alignment_roll_uncertainty_deg);
+      }
       if (metrics.rpe && metrics.rpe->num_pairs > 0) {
         const RelativePoseErrors& rpe = *metrics.rpe;
         out += fmt::format(

@@ -5,6 +5,8 @@
 #include <limits>
 #include <unordered_map>
 
+#include <Eigen/Eigenvalues>
+
 #include "loopsfm/geometry/umeyama.h"
 #include "loopsfm/util/errors.h"
 
@@ -51,6 +53,28 @@ Rigid3d AlignPose(const Sim3d& gt_from_est, const Rigid3d& world_from_cam) {
 void SetErrorsToNaN(TrajectoryMetrics* m) {
   m->ate_rmse = m->ate_mean = m->ate_median = m->ate_max = m->ate_fraction_of_path = kNaN;
   m->rotation_error_mean_deg = m->rotation_error_median_deg = m->rotation_error_max_deg = kNaN;
+  m->alignment_roll_uncertainty_deg = kNaN;
+}
+
+// Standard error (degrees) of the alignment's rotation about the main axis of `centres`
+// (ground truth), given the aligned centres' `errors`: a roll by theta moves a centre at
+// distance r from the axis by about r * theta, across the axis, so the least-squares roll
+// has the standard error rms(errors across the axis) / sqrt(sum of r^2).
+double RollUncertaintyDegrees(const std::vector<Eigen::Vector3d>& centres,
+                              const std::vector<Eigen::Vector3d>& errors) {
+  Eigen::Vector3d mean = Eigen::Vector3d::Zero();
+  for (const Eigen::Vector3d& c : centres) mean += c;
+  mean /= static_cast<double>(centres.size());
+  Eigen::Matrix3d scatter = Eigen::Matrix3d::Zero();
+  for (const Eigen::Vector3d& c : centres) scatter += (c - mean) * (c - mean).transpose();
+  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eigen(scatter);
+  const Eigen::Vector3d axis = eigen.eigenvectors().col(2);  // largest eigenvalue
+  // The scatter off the axis: the centres' squared distances from it, summed.
+  const double off_axis = eigen.eigenvalues()(0) + eigen.eigenvalues()(1);
+  double across = 0.0;
+  for (const Eigen::Vector3d& e : errors) across += (e - e.dot(axis) * axis).squaredNorm();
+  if (!(off_axis > 0.0)) return kNaN;
+  return std::atan(std::sqrt(across / errors.size() / off_axis)) * 180.0 / M_PI;
 }
 
 RelativePoseErrors ComputeRpe(const std::vector<TrajectoryEntry>& ground_truth,
@@ -285,6 +309,7 @@ TrajectoryMetrics EvaluateTrajectory(const std::vector<TrajectoryEntry>& estimat
   metrics.gt_from_estimated = *gt_from_est;
 
   std::vector<double> position_errors, rotation_errors;
+  std::vector<Eigen::Vector3d> centre_errors;
   std::vector<Rigid3d> aligned_by_gt_index(ground_truth.size());
   std::vector<bool> matched_by_gt_index(ground_truth.size(), false);
   for (size_t i = 0; i < matches.size(); ++i) {
@@ -296,6 +321,7 @@ TrajectoryMetrics EvaluateTrajectory(const std::vector<TrajectoryEntry>& estimat
     frame.position_error = (aligned.translation - gt.translation).norm();
     frame.rotation_error_deg = RotationAngleDegrees(gt.rotation.inverse() * aligned.rotation);
     position_errors.push_back(frame.position_error);
+    centre_errors.push_back(aligned.translation - gt.translation);
     rotation_errors.push_back(frame.rotation_error_deg);
     aligned_by_gt_index[matches[i].gt_index] = aligned;
     matched_by_gt_index[matches[i].gt_index] = true;
@@ -309,6 +335,7 @@ TrajectoryMetrics EvaluateTrajectory(const std::vector<TrajectoryEntry>& estimat
   metrics.rotation_error_mean_deg = Mean(rotation_errors);
   metrics.rotation_error_median_deg = Median(rotation_errors);
   metrics.rotation_error_max_deg = Max(rotation_errors);
+  metrics.alignment_roll_uncertainty_deg = RollUncertaintyDegrees(gt_centres, centre_errors);
   if (options.rpe_step > 0) {
     metrics.rpe =
         ComputeRpe(ground_truth, aligned_by_gt_index, matched_by_gt_index, options.rpe_step);
@@ -350,6 +377,7 @@ nlohmann::json ToJson(const TrajectoryMetrics& m, bool include_frames) {
   json["rotation_error_mean_deg"] = Number(m.rotation_error_mean_deg);
   json["rotation_error_median_deg"] = Number(m.rotation_error_median_deg);
   json["rotation_error_max_deg"] = Number(m.rotation_error_max_deg);
+  json["alignment_roll_uncertainty_deg"] = Number(m.alignment_roll_uncertainty_deg);
   if (m.rpe) {
     json["rpe"] = {{"step", m.rpe->step},
                    {"num_pairs", m.rpe->num_pairs},

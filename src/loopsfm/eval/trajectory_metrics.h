@@ -132,6 +132,13 @@ struct TrajectoryMetrics {
   double rotation_error_mean_deg = 0.0;
   double rotation_error_median_deg = 0.0;
   double rotation_error_max_deg = 0.0;
+  // How well the centres fix the alignment's roll about their main axis (the principal
+  // direction of the ground-truth centres), degrees: the standard error of that angle in the
+  // least-squares fit: the RMS of the aligned centres' errors across the axis over the root
+  // of the ground-truth centres' summed squared distances from it. Centres nearly on a line (a straight walk) leave the roll to the
+  // shake across it, and the rotation errors above then measure mostly that roll; the
+  // relative pose error at a long step does not depend on the alignment.
+  double alignment_roll_uncertainty_deg = 0.0;
 
   // Present when options.rpe_step > 0 and the alignment succeeded.
   std::optional<RelativePoseErrors> rpe;

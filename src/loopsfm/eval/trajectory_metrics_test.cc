@@ -238,6 +238,46 @@ TEST(TrajectoryMetrics, CollinearCentresAreExplained) {
   EXPECT_DOUBLE_EQ(m.gt_path_length, 5.0);
 }
 
+// A straight walk with a few centimetres of shake across it, estimated with a lateral error
+// ten times larger: the centres barely fix the alignment's roll about the walk, and the
+// metrics say so. The same error on a loop leaves the roll well fixed.
+TEST(TrajectoryMetrics, RollUncertaintyIsLargeWhereCentresAreNearlyOnALine) {
+  auto with_error = [](const std::vector<TrajectoryEntry>& gt) {
+    std::vector<TrajectoryEntry> estimated = gt;
+    for (size_t i = 0; i < gt.size(); ++i) {
+      const double t = 2.0 * M_PI * i / gt.size();
+      estimated[i].world_from_cam.translation += Eigen::Vector3d(0, 0.3 * std::sin(t), 0.2 * std::cos(2 * t));
+    }
+    return estimated;
+  };
+  std::vector<TrajectoryEntry> line;
+  for (int i = 0; i < 200; ++i) {
+    const Eigen::Vector3d centre(i, 0.03 * std::sin(0.7 * i), 0.02 * std::cos(1.3 * i));
+    line.push_back({FrameName(i), Rigid3d(Eigen::Quaterniond::Identity(), centre)});
+  }
+  const TrajectoryMetrics straight = EvaluateTrajectory(with_error(line), line);
+  ASSERT_TRUE(straight.aligned) << straight.explanation;
+  const std::vector<TrajectoryEntry> loop = LoopTrajectory(200);
+  const TrajectoryMetrics round = EvaluateTrajectory(with_error(loop), loop);
+  ASSERT_TRUE(round.aligned) << round.explanation;
+  EXPECT_GT(straight.alignment_roll_uncertainty_deg, 10 * round.alignment_roll_uncertainty_deg)
+      << straight.alignment_roll_uncertainty_deg;
+  EXPECT_LT(round.alignment_roll_uncertainty_deg, 0.2);
+  // The RMS error across the walk over the root of the centres' summed squared distances
+  // from it (the walk's main axis is x to within the shake).
+  double off_axis = 0.0, across = 0.0;
+  for (size_t i = 0; i < line.size(); ++i) {
+    const Eigen::Vector3d c = line[i].world_from_cam.translation;
+    off_axis += std::pow(c.y(), 2) + std::pow(c.z(), 2);
+    const Eigen::Vector3d e = straight.frames[i].aligned_centre - c;
+    across += std::pow(e.y(), 2) + std::pow(e.z(), 2);
+  }
+  EXPECT_NEAR(straight.alignment_roll_uncertainty_deg,
+              std::atan(std::sqrt(across / line.size() / off_axis)) * 180.0 / M_PI,
+              0.02 * straight.alignment_roll_uncertainty_deg);
+  EXPECT_TRUE(ToJson(straight, false).contains("alignment_roll_uncertainty_deg"));
+}
+
 TEST(TrajectoryMetrics, NamesJoinExactlyFirstThenWithoutExtension) {
   EXPECT_EQ(TrajectoryNameKey("images/frame_000001.jpg"), "frame_000001");
   EXPECT_EQ(TrajectoryNameKey("frame_000001"), "frame_000001");
