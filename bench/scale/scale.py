@@ -13,10 +13,11 @@ about 0.1 m a frame (a brisk walk), hand-held shake (1 degree) and jitter (2 cm)
 noise, JPEG, the view turned 20 degrees ahead. 1k and 2k walk one and two laps round a
 block, 5k two and a half laps of a figure eight round two blocks, 10k five laps: every one
 of these default sizes returns to places it has seen (loops to close). The avenue sizes,
-rendered and run only when --sizes names them (1k-avenue, 2k-avenue, 5k-avenue, 10k-avenue),
-walk as far at the same density straight along a row of blocks and never come back: how
-mapping grows with the length of a walk without laps over the same facades (give them a DIR
-of their own: the table and the fits go by frame count). `run` reconstructs each with default
+rendered and run only when --sizes names them (1k-avenue, 2k-avenue, 5k-avenue, 10k-avenue,
+21k-avenue), walk as far at the same density straight along a row of blocks and never come
+back: how mapping grows with the length of a walk without laps over the same facades (give
+them a DIR of their own: the table and the fits go by frame count). 21k-avenue keeps about
+4,500 frames, the views of the thesis' Figure 6.2 (`views.py`). `run` reconstructs each with default
 flags (self-calibrated, adaptive keyframes), one after the other, scores it with `loopsfm
 eval`, prints a Markdown table and the fitted exponents (time ~ frames^k by least squares on
 log-log), and writes DIR/scale.json; sizes run earlier into DIR with the same flags stay in the
@@ -47,7 +48,7 @@ SCENES = {
 DEFAULT_SIZES = tuple(SCENES)
 # Optional: walks as long as the default sizes' that never revisit a place.
 SCENES.update({f"{k}k-avenue": ["--frames", str(1000 * k), "--route", "avenue", "--laps", str(k),
-                                "--revisit", "0"] for k in (1, 2, 5, 10)})
+                                "--revisit", "0"] for k in (1, 2, 5, 10, 21)})
 STAGES = ("extract", "match", "fill-in", "map", "localise")
 
 

@@ -6,6 +6,10 @@ thesis' Figure 6.2, issue 39).
         [--views 125,250,500,1000,2451] [--strategies exhaustive:500,lowres:1000,vocabtree]
         [--loopsfm build/loopsfm]
 
+For the thesis' 4,500 views: `scale.py render --sizes 21k-avenue`, then `loopsfm extract
+DIR/21k-avenue/video.mp4 -d DB` (about 4,500 keyframes) and this script with `--database DB
+--views 125,250,500,1000,2000,4508`.
+
 The views are the first N frames of one extracted database (a `bench/scale/scale.py` walk:
 adaptive keyframes, so the frames stand at the same spacing whatever N is). For each N the
 script writes a database of those frames alone, without any matches, runs
