@@ -6,6 +6,7 @@
 #include <fstream>
 #include <iterator>
 
+#include "loopsfm/sfm/incremental_mapper.h"
 #include "loopsfm/sfm/sfm_test_problem.h"
 
 namespace loopsfm {

@@ -12,7 +12,9 @@
 
 #include <vector>
 
-#include "loopsfm/sfm/incremental_mapper.h"
+#include "loopsfm/sfm/mapper_input.h"
+#include "loopsfm/sfm/mapper_options.h"
+#include "loopsfm/sfm/mapper_report.h"
 
 namespace loopsfm {
 

@@ -15,36 +15,6 @@
 
 namespace loopsfm {
 
-void LoopClosureOptions::Check() const {
-  LOOPSFM_REQUIRE_OPTION(min_frame_gap >= 2, "loop: frame gap must be at least 2, got {}",
-                         min_frame_gap);
-  LOOPSFM_REQUIRE_OPTION(min_frame_correspondences >= 3 && min_frame_inliers >= 3 &&
-                             min_num_inliers >= 3,
-                         "loop: correspondence and inlier counts must be at least 3");
-  LOOPSFM_REQUIRE_OPTION(num_consistent >= 1, "loop: at least one registration must agree");
-  LOOPSFM_REQUIRE_OPTION(min_inlier_ratio > 0 && min_inlier_ratio <= 1,
-                         "loop: inlier ratio must be in (0, 1], got {}", min_inlier_ratio);
-  LOOPSFM_REQUIRE_OPTION(max_reproj_error_px > 0, "loop: error threshold must be positive");
-  LOOPSFM_REQUIRE_OPTION(max_correction_fraction_of_path > 0,
-                         "loop: correction bound must be positive");
-  LOOPSFM_REQUIRE_OPTION(max_correction_scale >= 1.0, "loop: scale bound must be at least 1");
-  LOOPSFM_REQUIRE_OPTION(covisibility_min_points >= 1, "loop: co-visibility needs a point");
-  LOOPSFM_REQUIRE_OPTION(loop_edge_weight > 0, "loop: edge weight must be positive");
-  LOOPSFM_REQUIRE_OPTION(split_weight > 0, "loop: split weight must be positive");
-  LOOPSFM_REQUIRE_OPTION(refine_points_per_frame >= 0,
-                         "loop: refine_points_per_frame must be >= 0 (got {})",
-                         refine_points_per_frame);
-  LOOPSFM_REQUIRE_OPTION(refine_function_tolerance > 0 && refine_function_tolerance < 1,
-                         "loop: refine_function_tolerance must be in (0, 1) (got {})",
-                         refine_function_tolerance);
-  LOOPSFM_REQUIRE_OPTION(polish_settle_tolerance >= 0,
-                         "loop: polish_settle_tolerance must be >= 0 (got {})",
-                         polish_settle_tolerance);
-  LOOPSFM_REQUIRE_OPTION(split_refine_ties_per_group > 0,
-                         "loop: split_refine_ties_per_group must be positive (got {})",
-                         split_refine_ties_per_group);
-}
-
 MapperInput WithoutLoopPairs(const MapperInput& input, int min_frame_gap) {
   std::unordered_map<image_t, int> index;
   std::unordered_map<image_t, size_t> num_points2D;

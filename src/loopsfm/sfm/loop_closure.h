@@ -27,7 +27,9 @@
 #include <vector>
 
 #include "loopsfm/math/random.h"
-#include "loopsfm/sfm/incremental_mapper.h"
+#include "loopsfm/sfm/mapper_input.h"
+#include "loopsfm/sfm/mapper_options.h"
+#include "loopsfm/sfm/mapper_report.h"
 #include "loopsfm/sfm/mapper_checkpoint.h"
 #include "loopsfm/sfm/point_alignment.h"
 

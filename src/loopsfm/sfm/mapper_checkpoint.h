@@ -11,7 +11,8 @@
 #include <vector>
 
 #include "loopsfm/scene/reconstruction.h"
-#include "loopsfm/sfm/incremental_mapper.h"
+#include "loopsfm/sfm/mapper_options.h"
+#include "loopsfm/sfm/mapper_report.h"
 
 namespace loopsfm {
 

@@ -2,6 +2,7 @@
 
 #include <gtest/gtest.h>
 
+#include "loopsfm/sfm/incremental_mapper.h"
 #include "loopsfm/sfm/sfm_test_problem.h"
 
 namespace loopsfm {

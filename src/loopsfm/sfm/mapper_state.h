@@ -20,7 +20,9 @@
 #include "loopsfm/geometry/triangulation.h"
 #include "loopsfm/math/random.h"
 #include "loopsfm/scene/reconstruction.h"
-#include "loopsfm/sfm/incremental_mapper.h"
+#include "loopsfm/sfm/mapper_input.h"
+#include "loopsfm/sfm/mapper_options.h"
+#include "loopsfm/sfm/mapper_report.h"
 #include "loopsfm/sfm/mapper_checkpoint.h"
 
 namespace loopsfm {

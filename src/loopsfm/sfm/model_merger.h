@@ -13,7 +13,6 @@
 
 #include "loopsfm/geometry/rigid3.h"
 #include "loopsfm/math/random.h"
-#include "loopsfm/sfm/incremental_mapper.h"
 
 namespace loopsfm {
 

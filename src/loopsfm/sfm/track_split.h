@@ -35,7 +35,8 @@
 // before that.
 
 #include "loopsfm/math/random.h"
-#include "loopsfm/sfm/incremental_mapper.h"
+#include "loopsfm/sfm/mapper_options.h"
+#include "loopsfm/sfm/mapper_report.h"
 
 namespace loopsfm {
 
