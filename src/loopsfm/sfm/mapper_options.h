@@ -56,13 +56,9 @@ struct LoopClosureOptions {
   double max_reproj_error_px = 8.0;
   // Plausible drift: the correction moves the recent end by at most this fraction of the
   // path walked between the two ends, and scales it by at most this factor (either way).
-  // The translation bound is what refuses look-alike places (repeated facades: 87-101 % of
-  // the path at scale 0.994-1.001). The scale bound only refuses alignments no drift could
-  // explain, and must allow what drift does over several laps: after mapping (withheld
-  // pairs) every loop is judged against the uncorrected map, and on drift2 (focal -5 %)
-  // one lap's end against the start asks for 1.50-1.53 and two laps' for 2.1-2.2; refused,
-  // those loops were left to the bundle, which closed them slowly and less well (stop-26
-  // and stop-27 notes).
+  // The translation bound refuses look-alike places; the scale bound only alignments no
+  // drift could explain, and allows what drift does over several laps
+  // (docs/mapper_options.md).
   double max_correction_fraction_of_path = 0.1;
   double max_correction_scale = 3.0;
   // Pose graph: frames sharing this many points are joined by a co-visibility edge; a loop
@@ -84,11 +80,8 @@ struct LoopClosureOptions {
   double polish_settle_tolerance = 1e-4;
   // After mapping (the gathered loops' one correction), the bundle over the longest tracks
   // ends once a step lowers its cost by less than this fraction: the full bundle polishes
-  // after it. On drift2 (focal -5 %, 115 loops) Ceres' 1e-6 took 14 steps, the last five
-  // lowering the cost by 0.02 % together; 1e-4 takes 9, and the full bundle still takes 15,
-  // to the same cost. While mapping it keeps Ceres' 1e-6: mapping goes on from the
-  // corrected cameras, and on drift2 with loops closed while mapping 1e-4 ended with a
-  // loop gap of 1.374 against 1.192.
+  // after it. While mapping it keeps Ceres' 1e-6, since mapping goes on from the corrected
+  // cameras (docs/mapper_options.md).
   double refine_function_tolerance = 1e-4;
   // Split tracks, in that first bundle: up to this many of each group's tied pairs, each
   // weighted to pull as hard as the group's share it stands for.
@@ -141,16 +134,13 @@ struct IncrementalMapperOptions {
   int local_ba_num_images = 6;
   // Global bundle adjustment when the registered frame count has grown by this fraction.
   // Video frames register in order with a local bundle each, so drift between two global
-  // bundles stays small: 0.5 against 0.25 gave the same accuracy on block, fox, kitti07_160
-  // and templeRing (ATE within 1.3 %, focal within 0.02 %) with 14 global bundles on block
-  // instead of 23 (their time -39 %).
+  // bundles stays small (docs/mapper_options.md).
   double global_ba_growth = 0.5;
   // A growth-triggered global bundle is skipped while the frames not in the model number at
   // most this fraction of it: growth ends with a global bundle anyway (when no frame
-  // registers), and it would come within that much growth of the skipped one. Two full
-  // bundles of nearly the same model end the mapping otherwise whenever the last growth step
-  // lands near the end (drift2, loops closed while mapping: 598 then 599 frames, 45.9 + 31.7
-  // s of a 310 s mapping). 0: never skip.
+  // registers), and it would come within that much growth of the skipped one; otherwise two
+  // full bundles of nearly the same model end the mapping whenever the last growth step
+  // lands near the end (docs/mapper_options.md). 0: never skip.
   double global_ba_end_margin = 0.1;
   // Growth-triggered global bundles of a video model larger than this many frames are
   // windowed: only the frames registered most recently (this many) move, with the points
