@@ -14,32 +14,122 @@
 
 namespace loopsfm {
 
+namespace {
+
+// 2D-3D correspondences of one frame, in the order RANSAC sees them.
+struct Correspondences {
+  std::vector<Eigen::Vector2d> points2D;
+  std::vector<Eigen::Vector3d> points3D;
+  size_t size() const { return points2D.size(); }
+};
+
+// Every 3D point of each keypoint's track is a candidate: where a track holds several,
+// RANSAC keeps the one that fits.
+Correspondences TrackCorrespondences(const MapperState& state, image_t image_id) {
+  const Reconstruction& rec = state.reconstruction();
+  const Image& image = rec.GetImage(image_id);
+  Correspondences all;
+  for (point2D_t idx = 0; idx < image.points2D.size(); ++idx) {
+    const int track = state.TrackOf(image_id, idx);
+    if (track < 0) continue;
+    for (point3D_t point : state.PointsOfTrack(track)) {
+      all.points2D.push_back(image.points2D[idx].xy);
+      all.points3D.push_back(rec.GetPoint3D(point).xyz);
+    }
+  }
+  return all;
+}
+
+// Enough inliers, absolutely and as a share of the correspondences, to register a frame.
+bool Registrable(const AbsolutePoseReport& pose, size_t num_correspondences,
+                 const IncrementalMapperOptions& options) {
+  return pose.success && pose.num_inliers >= options.abs_pose_min_num_inliers &&
+         pose.num_inliers >= options.abs_pose_min_inlier_ratio * num_correspondences;
+}
+
+// `result` replaced by the pose estimated from the points the frame shares with its
+// neighbours in capture order, with its inliers counted over all the correspondences;
+// false (and `result` untouched) where those points give no registrable pose.
+bool PoseFromNeighbours(const MapperState& state, image_t image_id,
+                        const std::vector<std::pair<point2D_t, point3D_t>>& neighbour,
+                        const Correspondences& all,
+                        const AbsolutePoseEstimationOptions& pose_options, Random& random,
+                        AbsolutePoseReport* result, int* num_fit) {
+  const Reconstruction& rec = state.reconstruction();
+  const Image& image = rec.GetImage(image_id);
+  const Camera& camera = rec.GetCamera(image.camera_id);
+  Correspondences near;
+  for (const auto& [idx, point] : neighbour) {
+    near.points2D.push_back(image.points2D[idx].xy);
+    near.points3D.push_back(rec.GetPoint3D(point).xyz);
+  }
+  const AbsolutePoseReport local =
+      EstimateAbsolutePose(near.points2D, near.points3D, camera, pose_options, random);
+  *num_fit = local.num_inliers;
+  if (!Registrable(local, near.size(), state.options())) return false;
+  result->cam_from_world = local.cam_from_world;
+  result->refinement_failed = local.refinement_failed;
+  result->num_inliers = 0;
+  const double max_error_sq = pose_options.max_error_px * pose_options.max_error_px;
+  for (size_t k = 0; k < all.size(); ++k) {
+    result->inlier_mask[k] = CalculateSquaredReprojectionError(
+                                 all.points2D[k], all.points3D[k], local.cam_from_world,
+                                 camera) <= max_error_sq;
+    result->num_inliers += result->inlier_mask[k];
+  }
+  return true;
+}
+
+// The diagnostic second round (record_alternate_poses): a RANSAC of its own over the
+// correspondences the registration rejected (for a keypoint whose track holds several
+// points, the candidates that did not fit), and how far its pose is from the first.
+RegistrationRounds AlternatePose(const MapperState& state, image_t image_id,
+                                 const Correspondences& all, const AbsolutePoseReport& first,
+                                 const AbsolutePoseEstimationOptions& pose_options) {
+  const IncrementalMapperOptions& options = state.options();
+  const Image& image = state.reconstruction().GetImage(image_id);
+  RegistrationRounds rounds;
+  rounds.frame = image.name;
+  rounds.num_correspondences = static_cast<int>(all.size());
+  rounds.num_inliers = first.num_inliers;
+  Correspondences rest;
+  for (size_t k = 0; k < all.size(); ++k) {
+    if (first.inlier_mask[k]) continue;
+    rest.points2D.push_back(all.points2D[k]);
+    rest.points3D.push_back(all.points3D[k]);
+  }
+  rounds.second_num_correspondences = static_cast<int>(rest.size());
+  if (static_cast<int>(rest.size()) < options.abs_pose_min_num_inliers) return rounds;
+  Random second_random(options.seed ^ (0x9e3779b97f4a7c15ULL * image_id));
+  const AbsolutePoseReport second =
+      EstimateAbsolutePose(rest.points2D, rest.points3D,
+                           state.reconstruction().GetCamera(image.camera_id), pose_options,
+                           second_random);
+  rounds.second_num_inliers = second.success ? second.num_inliers : 0;
+  rounds.second_pose_found = Registrable(second, rest.size(), options);
+  if (second.success) {
+    const Rigid3d first_from_second = first.cam_from_world * second.cam_from_world.Inverse();
+    rounds.second_centre_distance = (first.cam_from_world.Inverse().translation -
+                                     second.cam_from_world.Inverse().translation).norm();
+    rounds.second_rotation_deg =
+        Eigen::AngleAxisd(first_from_second.rotation).angle() * 180.0 / M_PI;
+  }
+  return rounds;
+}
+
+}  // namespace
+
 bool MapperState::RegisterImage(image_t image_id, Random& random, MapperReport* report) {
   Timer timer;
   const Image& image = reconstruction_.GetImage(image_id);
-  // Every 3D point of the keypoint's track is a candidate: where a track holds several,
-  // RANSAC keeps the one that fits.
-  std::vector<Eigen::Vector2d> points2D;
-  std::vector<Eigen::Vector3d> points3D;
-  for (point2D_t idx = 0; idx < image.points2D.size(); ++idx) {
-    const int track = TrackOf(image_id, idx);
-    if (track < 0) continue;
-    for (point3D_t point : PointsOfTrack(track)) {
-      points2D.push_back(image.points2D[idx].xy);
-      points3D.push_back(reconstruction_.GetPoint3D(point).xyz);
-    }
-  }
+  const Correspondences all = TrackCorrespondences(*this, image_id);
   AbsolutePoseEstimationOptions pose_options;
   pose_options.max_error_px = options_.abs_pose_max_error_px;
   pose_options.min_num_inliers = options_.abs_pose_min_num_inliers;
-  const Camera& camera = reconstruction_.GetCamera(image.camera_id);
-  AbsolutePoseReport result =
-      EstimateAbsolutePose(points2D, points3D, camera, pose_options, random);
-  auto registrable = [&](const AbsolutePoseReport& pose, size_t num_correspondences) {
-    return pose.success && pose.num_inliers >= options_.abs_pose_min_num_inliers &&
-           pose.num_inliers >= options_.abs_pose_min_inlier_ratio * num_correspondences;
-  };
-  const bool accepted = registrable(result, points2D.size());
+  AbsolutePoseReport result = EstimateAbsolutePose(
+      all.points2D, all.points3D, reconstruction_.GetCamera(image.camera_id), pose_options,
+      random);
+  const bool accepted = Registrable(result, all.size(), options_);
   const std::vector<std::pair<point2D_t, point3D_t>> neighbour =
       accepted ? NeighbourCorrespondences(image_id)
                : std::vector<std::pair<point2D_t, point3D_t>>{};
@@ -50,38 +140,22 @@ bool MapperState::RegisterImage(image_t image_id, Random& random, MapperReport* 
     // inliers are look-alike structure elsewhere in the model (a twin facade). Estimate it
     // again from the points it shares with those frames, as a tracker would.
     ++report->num_poses_against_neighbours;
-    std::vector<Eigen::Vector2d> near2D;
-    std::vector<Eigen::Vector3d> near3D;
-    for (const auto& [idx, point] : neighbour) {
-      near2D.push_back(image.points2D[idx].xy);
-      near3D.push_back(reconstruction_.GetPoint3D(point).xyz);
-    }
-    const AbsolutePoseReport local =
-        EstimateAbsolutePose(near2D, near3D, camera, pose_options, random);
-    if (!registrable(local, near2D.size())) {
+    const int num_inliers = result.num_inliers;
+    int num_fit = 0;
+    if (!PoseFromNeighbours(*this, image_id, neighbour, all, pose_options, random, &result,
+                            &num_fit)) {
       report->seconds_registration += timer.ElapsedSeconds();
       spdlog::debug("could not register {}: its pose ({} of {} correspondences) fits {} of {} "
                     "points of the frames next to it, and those points give no pose ({} fit)",
-                    image.name, result.num_inliers, points2D.size(), agreement.num_fit,
-                    agreement.num_checked, local.num_inliers);
+                    image.name, num_inliers, all.size(), agreement.num_fit,
+                    agreement.num_checked, num_fit);
       return false;
     }
     ++report->num_poses_from_neighbours;
     spdlog::debug("{}: its pose ({} of {} correspondences) fits {} of {} points of the frames "
                   "next to it; registered from those points ({} fit)",
-                  image.name, result.num_inliers, points2D.size(), agreement.num_fit,
-                  agreement.num_checked, local.num_inliers);
-    // Inliers of the new pose over all the correspondences.
-    result.cam_from_world = local.cam_from_world;
-    result.refinement_failed = local.refinement_failed;
-    result.num_inliers = 0;
-    const double max_error_sq = options_.abs_pose_max_error_px * options_.abs_pose_max_error_px;
-    for (size_t k = 0; k < points2D.size(); ++k) {
-      result.inlier_mask[k] = CalculateSquaredReprojectionError(
-                                  points2D[k], points3D[k], local.cam_from_world, camera) <=
-                              max_error_sq;
-      result.num_inliers += result.inlier_mask[k];
-    }
+                  image.name, num_inliers, all.size(), agreement.num_fit,
+                  agreement.num_checked, num_fit);
   }
   report->seconds_registration += timer.ElapsedSeconds();
   if (accepted && result.refinement_failed) {
@@ -90,45 +164,13 @@ bool MapperState::RegisterImage(image_t image_id, Random& random, MapperReport* 
   }
   if (!accepted) {
     spdlog::debug("could not register {}: {} of {} correspondences fit", image.name,
-                  result.num_inliers, points2D.size());
+                  result.num_inliers, all.size());
     return false;
   }
   reconstruction_.GetImage(image_id).cam_from_world = result.cam_from_world;
   reconstruction_.RegisterImage(image_id);
   if (options_.record_alternate_poses) {
-    RegistrationRounds rounds;
-    rounds.frame = image.name;
-    rounds.num_correspondences = static_cast<int>(points2D.size());
-    rounds.num_inliers = result.num_inliers;
-    // The second round sees the correspondences the first rejected (for a keypoint whose
-    // track holds several points, the candidates that did not fit).
-    std::vector<Eigen::Vector2d> rest2D;
-    std::vector<Eigen::Vector3d> rest3D;
-    for (size_t k = 0; k < points2D.size(); ++k) {
-      if (result.inlier_mask[k]) continue;
-      rest2D.push_back(points2D[k]);
-      rest3D.push_back(points3D[k]);
-    }
-    rounds.second_num_correspondences = static_cast<int>(rest2D.size());
-    if (static_cast<int>(rest2D.size()) >= options_.abs_pose_min_num_inliers) {
-      Random second_random(options_.seed ^ (0x9e3779b97f4a7c15ULL * image_id));
-      const AbsolutePoseReport second = EstimateAbsolutePose(
-          rest2D, rest3D, reconstruction_.GetCamera(image.camera_id), pose_options, second_random);
-      rounds.second_num_inliers = second.success ? second.num_inliers : 0;
-      rounds.second_pose_found =
-          second.success && second.num_inliers >= options_.abs_pose_min_num_inliers &&
-          second.num_inliers >= options_.abs_pose_min_inlier_ratio * rest2D.size();
-      if (second.success) {
-        const Rigid3d first_from_second =
-            result.cam_from_world * second.cam_from_world.Inverse();
-        rounds.second_centre_distance =
-            (result.cam_from_world.Inverse().translation -
-             second.cam_from_world.Inverse().translation).norm();
-        rounds.second_rotation_deg =
-            Eigen::AngleAxisd(first_from_second.rotation).angle() * 180.0 / M_PI;
-      }
-    }
-    report->registrations.push_back(rounds);
+    report->registrations.push_back(AlternatePose(*this, image_id, all, result, pose_options));
   }
   return true;
 }
