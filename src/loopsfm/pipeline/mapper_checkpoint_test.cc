@@ -6,7 +6,7 @@
 #include <fstream>
 #include <iterator>
 
-#include "loopsfm/sfm/incremental_mapper.h"
+#include "loopsfm/loop/loop_closing.h"
 #include "loopsfm/sfm/sfm_test_problem.h"
 
 namespace loopsfm {
@@ -25,7 +25,7 @@ class MapperCheckpointFileTest : public ::testing::Test {
     MapperCheckpointing saving;
     saving.interval_seconds = 0.0;
     saving.save = [&](const MapperCheckpoint& c) { checkpoints_.push_back(c); };
-    models_ = RunIncrementalMapper(problem_.input, options_, &report_, {}, saving);
+    models_ = MapWithLoopClosing(problem_.input, options_, &report_, {}, saving);
   }
   void SetUp() override {
     ASSERT_GT(checkpoints_.size(), 10u);
@@ -88,7 +88,7 @@ TEST_F(MapperCheckpointFileTest, ResumingFromTheFileGivesTheUninterruptedResult)
   resuming.resume = &*read;
   MapperReport report;
   const std::vector<Reconstruction> resumed =
-      RunIncrementalMapper(problem_.input, options_, &report, {}, resuming);
+      MapWithLoopClosing(problem_.input, options_, &report, {}, resuming);
   ASSERT_EQ(resumed.size(), models_.size());
   const Reconstruction& a = models_[0];
   const Reconstruction& b = resumed[0];

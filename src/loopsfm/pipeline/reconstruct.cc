@@ -6,6 +6,7 @@
 #include <unordered_map>
 
 #include "loopsfm/eval/trajectory_metrics.h"
+#include "loopsfm/loop/loop_closing.h"
 #include "loopsfm/pipeline/mapper_checkpoint.h"
 #include "loopsfm/pipeline/run_report.h"
 #include "loopsfm/report/html_report.h"
@@ -273,8 +274,8 @@ ReconstructReport Reconstruct(const fs::path& input, const fs::path& output_dir,
         };
       }
       Progress progress("map", mapper_input.frames.size(), options.show_progress);
-      models = RunIncrementalMapper(mapper_input, options.mapper, &report.mapper,
-                                    [&](size_t, size_t) { progress.Advance(); }, checkpointing);
+      models = MapWithLoopClosing(mapper_input, options.mapper, &report.mapper,
+                                  [&](size_t, size_t) { progress.Advance(); }, checkpointing);
     }
     report.stage_times.push_back({pass == 0 ? "map" : "map-again", stage.ElapsedSeconds()});
     // Once per database: a rerun (which maps the fill-ins from the start) adds no more.

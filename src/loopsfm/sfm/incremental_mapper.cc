@@ -7,9 +7,7 @@
 #include <unordered_set>
 
 #include "loopsfm/sfm/initial_pair.h"
-#include "loopsfm/sfm/loop_closure.h"
 #include "loopsfm/sfm/mapper_checkpoint.h"
-#include "loopsfm/sfm/track_split.h"
 #include "loopsfm/sfm/mapper_state.h"
 #include "loopsfm/sfm/model_merger.h"
 #include "loopsfm/util/errors.h"
@@ -30,10 +28,9 @@ class IncrementalMapper {
  public:
   IncrementalMapper(const MapperInput& input, const IncrementalMapperOptions& options,
                     MapperReport* report, const MapperProgress& progress,
-                    const MapperCheckpointing& checkpointing)
+                    const MapperCheckpointing& checkpointing, MapperHook* hook)
       : input_(input), options_(options), report_(*report), progress_(progress),
-        checkpointing_(checkpointing), random_(options.seed),
-        loop_closer_(input, options.loop_closure, options.seed + 1) {}
+        checkpointing_(checkpointing), random_(options.seed), hook_(hook) {}
 
   std::vector<Reconstruction> Run() {
     Timer ranking;
@@ -75,10 +72,7 @@ class IncrementalMapper {
       std::sort(models_.begin(), models_.end(), [](const ModelPtr& a, const ModelPtr& b) {
         return a->reconstruction().NumRegImages() > b->reconstruction().NumRegImages();
       });
-      if (options_.loop_closure.SplitTracks() && !models_.empty()) {
-        Random split_random(options_.seed + 2);
-        CloseLoopsBySplitTracks(*models_[0], options_.loop_closure, split_random, &report_);
-      }
+      if (hook_ && !models_.empty()) hook_->AfterMapping(*models_[0], &report_);
       if (checkpointing_.save) {
         Timer timer;
         checkpointing_.save(Save(nullptr, /*finished=*/true));
@@ -123,7 +117,7 @@ class IncrementalMapper {
     }
     checkpoint.tried_initial_pairs = tried_;
     checkpoint.random_state = random_.State();
-    loop_closer_.Save(&checkpoint);
+    if (hook_) hook_->Save(&checkpoint);
     checkpoint.report = report_;
     return checkpoint;
   }
@@ -148,7 +142,7 @@ class IncrementalMapper {
       grown = std::make_unique<MapperState>(input_, options_);
       grown->Restore(*checkpoint.growing);
     }
-    loop_closer_.Restore(checkpoint);  // the last step that may throw
+    if (hook_) hook_->Restore(checkpoint);  // the last step that may throw
     for (size_t m = 0; m < kept.size(); ++m) {
       if (checkpoint.kept[m].merge_failures > 0) {
         merge_failures_[kept[m].get()] = checkpoint.kept[m].merge_failures;
@@ -263,87 +257,100 @@ class IncrementalMapper {
   void GrowUntilStalled(ModelPtr& model) {
     if (!resume_growth_) growth_ = {{}, {}, model->reconstruction().NumRegImages(), {}, false};
     resume_growth_ = false;
-    auto& [failed_at, ever_failed, last_global_size, recent, refined_since_stall] = growth_;
     while (true) {
       MaybeSaveCheckpoint(*model);
-      Reconstruction& rec = model->reconstruction();
       Timer ranking;  // choosing the next frame is part of registering it
-      std::vector<std::tuple<bool, size_t, image_t>> order;
-      for (const auto& [id, count] : model->CountVisibleTracks()) {
-        if (count < static_cast<size_t>(options_.abs_pose_min_num_inliers)) continue;
-        const auto failed = failed_at.find(id);
-        if (failed != failed_at.end() && count < options_.registration_retry_growth * failed->second) {
-          continue;
-        }
-        const int owner = KeptModelOf(id);
-        if (owner >= 0 && merge_failures_[models_[owner].get()] >= kMaxMergeFailures) continue;
-        order.push_back(
-            {model->NearRegisteredFrame(id, options_.registration_capture_window), count, id});
-      }
-      std::sort(order.begin(), order.end(), std::greater<>());
+      const std::vector<std::tuple<bool, size_t, image_t>> order = RegistrationOrder(*model);
       report_.seconds_registration += ranking.ElapsedSeconds();
       bool registered = false;
       for (const auto& [near, count, image_id] : order) {
-        if (!model->RegisterImage(image_id, random_, &report_)) {
-          failed_at[image_id] = count;
-          ever_failed.insert(image_id);
-          continue;
-        }
-        Timer tri_timer;
-        model->TriangulateImage(image_id);
-        report_.seconds_triangulation += tri_timer.ElapsedSeconds();
-        if (!model->LocalBundle(image_id, &report_)) {
-          rec.DeRegisterImage(image_id);
-          failed_at[image_id] = count;
-          ever_failed.insert(image_id);
-          continue;
-        }
-        registered = true;
-        ++report_.num_registered;
-        failed_at.erase(image_id);
-        if (ever_failed.erase(image_id)) ++report_.num_registered_on_retry;
-        if (options_.global_ba_window > 0) {
-          recent.push_back(image_id);
-          if (recent.size() > static_cast<size_t>(options_.global_ba_window)) {
-            recent.erase(recent.begin());
-          }
-        }
-        if (options_.loop_closure.CloseWhileMapping() &&
-            loop_closer_.AfterRegistration(*model, image_id, &report_)) {
-          // Closing ended with a global refinement.
-          last_global_size = rec.NumRegImages();
-          failed_at.clear();
-        } else if (RefinementDue(rec.NumRegImages(), last_global_size) && !GrowthEndsSoon(rec)) {
-          if (options_.global_ba_window > 0 &&
-              rec.NumRegImages() > static_cast<size_t>(options_.global_ba_window)) {
-            model->WindowRefinement(recent, &report_);
-          } else {
-            model->GlobalRefinement(&report_);
-          }
-          last_global_size = rec.NumRegImages();
-          failed_at.clear();
-        }
-        if (progress_) progress_(rec.NumRegImages(), input_.frames.size());
-        // A frame of a kept model: the two models meet here.
-        const int owner = KeptModelOf(image_id);
-        if (owner >= 0 && merge_failures_[models_[owner].get()] < kMaxMergeFailures &&
-            TryMerge(model, owner)) {
-          last_global_size = model->reconstruction().NumRegImages();
-          failed_at.clear();
-        }
-        break;
+        if ((registered = TryRegister(model, image_id, count))) break;
       }
       if (registered) {
-        refined_since_stall = false;
+        growth_.refined_since_stall = false;
         continue;
       }
-      if (refined_since_stall) break;
+      if (growth_.refined_since_stall) break;
       // Stalled: refine everything and give every frame another try.
       model->GlobalRefinement(&report_);
+      growth_.last_global_size = model->reconstruction().NumRegImages();
+      growth_.failed_at.clear();
+      growth_.refined_since_stall = true;
+    }
+  }
+
+  // The frames to try next, best first: (near a registered frame in capture order, visible
+  // tracks, id), for frames that see enough tracks, and more than when they last failed.
+  std::vector<std::tuple<bool, size_t, image_t>> RegistrationOrder(MapperState& model) {
+    std::vector<std::tuple<bool, size_t, image_t>> order;
+    for (const auto& [id, count] : model.CountVisibleTracks()) {
+      if (count < static_cast<size_t>(options_.abs_pose_min_num_inliers)) continue;
+      const auto failed = growth_.failed_at.find(id);
+      if (failed != growth_.failed_at.end() &&
+          count < options_.registration_retry_growth * failed->second) {
+        continue;
+      }
+      const int owner = KeptModelOf(id);
+      if (owner >= 0 && merge_failures_[models_[owner].get()] >= kMaxMergeFailures) continue;
+      order.push_back(
+          {model.NearRegisteredFrame(id, options_.registration_capture_window), count, id});
+    }
+    std::sort(order.begin(), order.end(), std::greater<>());
+    return order;
+  }
+
+  // Registers the frame (which sees `count` tracks) with its triangulation and local bundle,
+  // then the hook, a growth bundle when one is due, and a merge where the frame belongs to a
+  // kept model. False (the failure noted) when it does not register.
+  bool TryRegister(ModelPtr& model, image_t image_id, size_t count) {
+    auto& [failed_at, ever_failed, last_global_size, recent, refined_since_stall] = growth_;
+    Reconstruction& rec = model->reconstruction();
+    if (!model->RegisterImage(image_id, random_, &report_)) {
+      failed_at[image_id] = count;
+      ever_failed.insert(image_id);
+      return false;
+    }
+    Timer tri_timer;
+    model->TriangulateImage(image_id);
+    report_.seconds_triangulation += tri_timer.ElapsedSeconds();
+    if (!model->LocalBundle(image_id, &report_)) {
+      rec.DeRegisterImage(image_id);
+      failed_at[image_id] = count;
+      ever_failed.insert(image_id);
+      return false;
+    }
+    ++report_.num_registered;
+    failed_at.erase(image_id);
+    if (ever_failed.erase(image_id)) ++report_.num_registered_on_retry;
+    if (options_.global_ba_window > 0) {
+      recent.push_back(image_id);
+      if (recent.size() > static_cast<size_t>(options_.global_ba_window)) {
+        recent.erase(recent.begin());
+      }
+    }
+    if (hook_ && hook_->AfterRegistration(*model, image_id, &report_)) {
+      // The hook ended with a global refinement.
+      last_global_size = rec.NumRegImages();
+      failed_at.clear();
+    } else if (RefinementDue(rec.NumRegImages(), last_global_size) && !GrowthEndsSoon(rec)) {
+      if (options_.global_ba_window > 0 &&
+          rec.NumRegImages() > static_cast<size_t>(options_.global_ba_window)) {
+        model->WindowRefinement(recent, &report_);
+      } else {
+        model->GlobalRefinement(&report_);
+      }
+      last_global_size = rec.NumRegImages();
+      failed_at.clear();
+    }
+    if (progress_) progress_(rec.NumRegImages(), input_.frames.size());
+    // A frame of a kept model: the two models meet here.
+    const int owner = KeptModelOf(image_id);
+    if (owner >= 0 && merge_failures_[models_[owner].get()] < kMaxMergeFailures &&
+        TryMerge(model, owner)) {
       last_global_size = model->reconstruction().NumRegImages();
       failed_at.clear();
-      refined_since_stall = true;
     }
+    return true;
   }
 
   // Whether a model grown to `now` frames since its last refinement at `last` frames is due
@@ -400,7 +407,7 @@ class IncrementalMapper {
   MapperProgress progress_;
   const MapperCheckpointing& checkpointing_;
   Random random_;
-  LoopCloser loop_closer_;
+  MapperHook* hook_;
   std::vector<ModelPtr> models_;
   std::unordered_map<const MapperState*, int> merge_failures_;
   std::vector<char> tried_;
@@ -416,25 +423,13 @@ std::vector<Reconstruction> RunIncrementalMapper(const MapperInput& input,
                                                  const IncrementalMapperOptions& options,
                                                  MapperReport* report,
                                                  const MapperProgress& progress,
-                                                 const MapperCheckpointing& checkpointing) {
+                                                 const MapperCheckpointing& checkpointing,
+                                                 MapperHook* hook) {
   options.Check();
   MapperReport local;
-  MapperReport* out = report ? report : &local;
-  if (!options.loop_closure.withhold_loop_pairs) {
-    IncrementalMapper mapper(input, options, out, progress, checkpointing);
-    return mapper.Run();
-  }
-  const MapperInput withheld = WithoutLoopPairs(input, options.loop_closure.min_frame_gap);
-  spdlog::info("mapper: {} loop pairs withheld until the end ({} pairs, {} tracks left)",
-               input.pairs.size() - withheld.pairs.size(), withheld.pairs.size(),
-               withheld.tracks.size());
-  IncrementalMapperOptions mapping = options;
-  mapping.loop_closure.withhold_loop_pairs = false;
-  mapping.loop_closure.method = LoopClosingMethod::kNone;  // no loop pairs to close yet
-  IncrementalMapper mapper(withheld, mapping, out, progress, checkpointing);
-  std::vector<Reconstruction> models = mapper.Run();
-  if (!models.empty()) models[0] = CloseLoopsAfterMapping(input, models[0], options, out);
-  return models;
+  IncrementalMapper mapper(input, options, report ? report : &local, progress, checkpointing,
+                           hook);
+  return mapper.Run();
 }
 
 }  // namespace loopsfm

@@ -17,6 +17,8 @@
 //   through a similarity estimated robustly from their common points, then bundle adjusted
 //   (model_merger.h). A grown model too small to keep is discarded and its frames stay
 //   free for later models. Only what has no link stays a separate model.
+// - Loop closing is not done here: it runs beside the mapper through a MapperHook
+//   (loop/loop_closing.h), told of every registration and of the end of mapping.
 
 #include <functional>
 #include <vector>
@@ -32,6 +34,24 @@ namespace loopsfm {
 using MapperProgress = std::function<void(size_t, size_t)>;
 
 struct MapperCheckpoint;  // mapper_checkpoint.h
+class MapperState;        // mapper_state.h
+
+// What runs beside the mapper (loop closing): told of each registration and of the end of
+// mapping, and saved with the mapper's state in its checkpoints.
+class MapperHook {
+ public:
+  virtual ~MapperHook() = default;
+  // After `image_id` was registered in `model` and its local bundle ran. Returns true when
+  // it changed the model and ended with a global refinement (the mapper then counts the
+  // model as refined).
+  virtual bool AfterRegistration(MapperState& model, image_t image_id, MapperReport* report) = 0;
+  // Once every model is grown and merged, with the largest, before the final checkpoint.
+  virtual void AfterMapping(MapperState& largest, MapperReport* report) = 0;
+  // Its state between registrations, into and from a checkpoint. Restore throws InputError
+  // for a state that is not one.
+  virtual void Save(MapperCheckpoint* checkpoint) const = 0;
+  virtual void Restore(const MapperCheckpoint& checkpoint) = 0;
+};
 
 struct MapperCheckpointing {
   // Called with the mapper's state every `interval_seconds` of mapping (between two
@@ -43,11 +63,14 @@ struct MapperCheckpointing {
 };
 
 // Models sorted by size, largest first. With `checkpointing`, the state is handed out now
-// and then, and mapping may go on from a saved state (mapper_checkpoint.h).
+// and then, and mapping may go on from a saved state (mapper_checkpoint.h). `hook` (may be
+// null) runs beside the mapper; options.loop_closure is read only by the hook and by the
+// refinement after a loop correction (MapperState::RefineAfterCorrection).
 std::vector<Reconstruction> RunIncrementalMapper(const MapperInput& input,
                                                  const IncrementalMapperOptions& options,
                                                  MapperReport* report,
                                                  const MapperProgress& progress = {},
-                                                 const MapperCheckpointing& checkpointing = {});
+                                                 const MapperCheckpointing& checkpointing = {},
+                                                 MapperHook* hook = nullptr);
 
 }  // namespace loopsfm

@@ -1,6 +1,7 @@
 #pragma once
-// A drifted walk out and back for the loop-closing tests (loop_closure_test.cc,
-// track_split_test.cc): the frames of the walk back registered where drift put them.
+// A drifted walk out and back for the loop-closing tests (loop/loop_closure_test.cc,
+// loop/track_split_test.cc) and the refinement after a correction (mapper_state_drift_test.cc):
+// the frames of the walk back registered where drift put them.
 
 #include <algorithm>
 #include <map>
@@ -21,6 +22,14 @@ inline MapperProblem WalkOutAndBack() {
   options.overlap = 6;
   options.walk_back = true;
   return MakeMapperProblem(options);
+}
+
+// Options for the walk: its two ends are 20 frames apart or more; one thread, so runs repeat.
+inline IncrementalMapperOptions LoopOptions() {
+  IncrementalMapperOptions options;
+  options.loop_closure.min_frame_gap = 20;
+  options.num_threads = 1;
+  return options;
 }
 
 // Registers every frame in capture order at its true pose, frames of the walk back moved

@@ -1,6 +1,6 @@
 #pragma once
 // The options of the incremental mapper (incremental_mapper.h) and of loop closing
-// (loop_closure.h, track_split.h).
+// (loop/loop_closing.h, loop/loop_closure.h, loop/track_split.h).
 
 #include <cstdint>
 #include <string>
@@ -23,11 +23,11 @@ struct IntrinsicsRefinement {
 };
 
 // How loops are closed: none maps exactly as without loop closing; posegraph corrects the
-// map while mapping (loop_closure.h); split ties the disagreeing points of split tracks
-// together in a bundle adjustment after mapping (track_split.h); both does the two.
+// map while mapping (loop/loop_closure.h); split ties the disagreeing points of split tracks
+// together in a bundle adjustment after mapping (loop/track_split.h); both does the two.
 enum class LoopClosingMethod { kNone, kPoseGraph, kSplit, kBoth };
 
-// Loop closing (loop_closure.h, track_split.h).
+// Loop closing (loop/loop_closing.h).
 struct LoopClosureOptions {
   LoopClosingMethod method = LoopClosingMethod::kPoseGraph;
   bool CloseWhileMapping() const {

@@ -374,20 +374,7 @@ void MapperState::WindowRefinement(const std::vector<image_t>& frames, MapperRep
   const GlobalBundleScope scope{.frames = frames};
   GlobalBundle(report, scope);
   Timer tri_timer;
-  std::vector<int> tracks;
-  for (image_t id : frames) {
-    if (!reconstruction_.IsRegistered(id)) continue;
-    for (int track : track_of_.at(id)) {
-      if (track >= 0) tracks.push_back(track);
-    }
-  }
-  std::sort(tracks.begin(), tracks.end());
-  tracks.erase(std::unique(tracks.begin(), tracks.end()), tracks.end());
-  size_t added = 0;
-  for (int track : tracks) {
-    added += TriangulateTrack(track);
-    MergePointsOfTrack(track);
-  }
+  const size_t added = RetriangulateFrames(frames);
   const size_t removed = FilterPoints(PointsSeenBy(reconstruction_, frames));
   size_t observations = 0;
   const std::vector<point3D_t> points = PointsSeenBy(reconstruction_, frames, &observations);
@@ -468,14 +455,6 @@ std::unordered_set<point3D_t> MapperState::LongestTrackPoints(int per_frame) con
     for (const TrackElement& el : elements) ++taken[el.image_id];
   }
   return subset;
-}
-
-void MapperState::RepositionPoints(const std::vector<point3D_t>& point_ids) {
-  for (point3D_t id : point_ids) {
-    Point3D& point = reconstruction_.GetPoint3D(id);
-    const TriangulationReport result = PositionFromObservations(point.track.elements);
-    if (result.success()) point.xyz = result.point3D_in_world;
-  }
 }
 
 }  // namespace loopsfm

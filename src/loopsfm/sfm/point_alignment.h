@@ -1,7 +1,7 @@
 #pragma once
 // A similarity between two sets of 3D points made from the same tracks, estimated robustly:
 // used to merge two models (model_merger.h) and to measure a loop inside one model
-// (loop_closure.h), where the two ends of a drifted loop hold different points of one track.
+// (loop/loop_closure.h), where the two ends of a drifted loop hold different points of one track.
 //
 // LO-RANSAC over Umeyama on minimal samples of three, re-estimated on the inliers; a
 // correspondence is an inlier when the moved point reprojects within the threshold in a

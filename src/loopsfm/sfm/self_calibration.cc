@@ -37,6 +37,96 @@ PairCorrespondences InlierPixels(const MapperPair& pair, const MapperFrame& fram
   return correspondences;
 }
 
+using FrameLookup = std::unordered_map<image_t, const MapperFrame*>;
+
+// The camera's uncalibrated pairs, most inliers first, at most max_num_pairs.
+std::vector<const MapperPair*> UncalibratedPairs(const MapperInput& input, camera_t camera_id,
+                                                 const FrameLookup& frame_of, int max_num_pairs) {
+  auto camera_of = [&](image_t id) {
+    const auto it = frame_of.find(id);
+    LOOPSFM_CHECK_MSG(it != frame_of.end(), "pair refers to frame {} without keypoints", id);
+    return it->second->camera_id;
+  };
+  std::vector<const MapperPair*> pairs;
+  for (const MapperPair& pair : input.pairs) {
+    if (pair.geometry.config == TwoViewGeometry::kUncalibrated &&
+        camera_of(pair.pair.image_id1) == camera_id && camera_of(pair.pair.image_id2) == camera_id) {
+      pairs.push_back(&pair);
+    }
+  }
+  std::stable_sort(pairs.begin(), pairs.end(), [](const MapperPair* a, const MapperPair* b) {
+    return a->geometry.inlier_matches.size() > b->geometry.inlier_matches.size();
+  });
+  if (pairs.size() > static_cast<size_t>(max_num_pairs)) pairs.resize(max_num_pairs);
+  return pairs;
+}
+
+// The focal length (and, where the model has one and the options ask, the radial term) of
+// one camera from its pairs; the camera takes them when the estimate succeeds.
+CameraSelfCalibration CalibrateCamera(const std::vector<const MapperPair*>& pairs,
+                                      const FrameLookup& frame_of,
+                                      const SelfCalibrationOptions& options, Camera* camera) {
+  CameraSelfCalibration entry;
+  entry.camera_id = camera->camera_id;
+  entry.initial_focal_px = entry.focal_px = camera->MeanFocalLength();
+  std::vector<Eigen::Matrix3d> fundamentals;
+  std::vector<double> weights;
+  for (const MapperPair* pair : pairs) {
+    fundamentals.push_back(pair->geometry.F);
+    weights.push_back(static_cast<double>(pair->geometry.inlier_matches.size()));
+  }
+  const Eigen::Vector2d principal_point(camera->width / 2.0, camera->height / 2.0);
+  const double radius_unit = DistortionRadiusUnit(camera->width, camera->height);
+  const int radial_index = RadialTermIndex(camera->model_id);
+  if (options.estimate_distortion && radial_index >= 0) {
+    std::vector<PairCorrespondences> correspondences;
+    correspondences.reserve(pairs.size());
+    for (const MapperPair* pair : pairs) {
+      correspondences.push_back(InlierPixels(*pair, *frame_of.at(pair->pair.image_id1),
+                                             *frame_of.at(pair->pair.image_id2)));
+    }
+    entry.distortion_estimated = true;
+    entry.distortion = EstimateRadialDistortion(correspondences, principal_point, camera->width,
+                                                camera->height, options.distortion);
+    if (entry.distortion.significant) {
+      // The verified F were fitted to distorted points: fit them again to undistorted ones.
+      fundamentals = UndistortedFundamentals(correspondences, principal_point, radius_unit,
+                                             entry.distortion.kappa,
+                                             options.distortion.error_cap_px);
+    } else {
+      spdlog::info("self-calibration: camera {} keeps k1 = 0: {}", camera->camera_id,
+                   entry.distortion.explanation);
+    }
+  }
+  entry.estimate = EstimateSharedFocalLength(fundamentals, weights, principal_point,
+                                             camera->width, camera->height, options.focal);
+  if (!entry.estimate.success) {
+    spdlog::warn("self-calibration: camera {} keeps its guessed focal length {:.1f} px: {}; "
+                 "bundle adjustment refines it, or pass --intrinsics",
+                 camera->camera_id, entry.initial_focal_px, entry.estimate.explanation);
+    return entry;
+  }
+  // The estimate assumes the principal point at the centre: put it there.
+  camera->params = Camera::GuessFromImageSize(camera->width, camera->height, camera->model_id).params;
+  camera->SetFocalLength(entry.estimate.focal_px);
+  entry.focal_px = entry.estimate.focal_px;
+  entry.applied = true;
+  if (entry.distortion.significant) {
+    entry.k1 = RadialTermForFocalLength(entry.distortion.kappa, entry.focal_px, radius_unit);
+    camera->params.at(radial_index) = entry.k1;
+    spdlog::info("self-calibration: camera {} radial term k1 {:.4f} (kappa {:.4f}: epipolar "
+                 "error {:.3f} px, {:.3f} px without, over {} pairs)",
+                 camera->camera_id, entry.k1, entry.distortion.kappa, entry.distortion.error_px,
+                 entry.distortion.error_px_without, entry.distortion.num_pairs_used);
+  }
+  spdlog::info("self-calibration: camera {} focal length {:.1f} px (guess {:.1f}), spread "
+               "{:.2f} %, {} of {} pairs agree ({} usable)",
+               camera->camera_id, entry.focal_px, entry.initial_focal_px,
+               100.0 * entry.estimate.spread, entry.estimate.num_pairs_inlier,
+               entry.estimate.num_pairs, entry.estimate.num_pairs_used);
+  return entry;
+}
+
 }  // namespace
 
 void SelfCalibrationOptions::Check() const {
@@ -51,93 +141,17 @@ SelfCalibrationReport SelfCalibrate(const SelfCalibrationOptions& options, Mappe
   options.Check();
   Timer timer;
   SelfCalibrationReport report;
-  std::unordered_map<image_t, const MapperFrame*> frame_of;
+  FrameLookup frame_of;
   for (const MapperFrame& frame : input->frames) frame_of[frame.image_id] = &frame;
-  auto camera_of = [&](image_t id) {
-    const auto it = frame_of.find(id);
-    LOOPSFM_CHECK_MSG(it != frame_of.end(), "pair refers to frame {} without keypoints", id);
-    return it->second->camera_id;
-  };
-
   std::unordered_map<camera_t, Camera*> calibrated;
   for (Camera& camera : input->cameras) {
     if (camera.has_prior_focal_length) continue;
-    CameraSelfCalibration entry;
-    entry.camera_id = camera.camera_id;
-    entry.initial_focal_px = entry.focal_px = camera.MeanFocalLength();
-
-    // The camera's uncalibrated pairs, most inliers first.
-    std::vector<const MapperPair*> pairs;
-    for (const MapperPair& pair : input->pairs) {
-      if (pair.geometry.config == TwoViewGeometry::kUncalibrated &&
-          camera_of(pair.pair.image_id1) == camera.camera_id &&
-          camera_of(pair.pair.image_id2) == camera.camera_id) {
-        pairs.push_back(&pair);
-      }
-    }
-    std::stable_sort(pairs.begin(), pairs.end(), [](const MapperPair* a, const MapperPair* b) {
-      return a->geometry.inlier_matches.size() > b->geometry.inlier_matches.size();
-    });
-    if (pairs.size() > static_cast<size_t>(options.max_num_pairs)) pairs.resize(options.max_num_pairs);
-    std::vector<Eigen::Matrix3d> fundamentals;
-    std::vector<double> weights;
-    for (const MapperPair* pair : pairs) {
-      fundamentals.push_back(pair->geometry.F);
-      weights.push_back(static_cast<double>(pair->geometry.inlier_matches.size()));
-    }
-    const Eigen::Vector2d principal_point(camera.width / 2.0, camera.height / 2.0);
-    const double radius_unit = DistortionRadiusUnit(camera.width, camera.height);
-    const int radial_index = RadialTermIndex(camera.model_id);
-    if (options.estimate_distortion && radial_index >= 0) {
-      std::vector<PairCorrespondences> correspondences;
-      correspondences.reserve(pairs.size());
-      for (const MapperPair* pair : pairs) {
-        correspondences.push_back(InlierPixels(*pair, *frame_of.at(pair->pair.image_id1),
-                                               *frame_of.at(pair->pair.image_id2)));
-      }
-      entry.distortion_estimated = true;
-      entry.distortion = EstimateRadialDistortion(correspondences, principal_point, camera.width,
-                                                  camera.height, options.distortion);
-      if (entry.distortion.significant) {
-        // The verified F were fitted to distorted points: fit them again to undistorted ones.
-        fundamentals = UndistortedFundamentals(correspondences, principal_point, radius_unit,
-                                               entry.distortion.kappa,
-                                               options.distortion.error_cap_px);
-      } else {
-        spdlog::info("self-calibration: camera {} keeps k1 = 0: {}", camera.camera_id,
-                     entry.distortion.explanation);
-      }
-    }
-    entry.estimate = EstimateSharedFocalLength(fundamentals, weights, principal_point,
-                                               camera.width, camera.height, options.focal);
-    if (entry.estimate.success) {
-      // The estimate assumes the principal point at the centre: put it there.
-      camera.params = Camera::GuessFromImageSize(camera.width, camera.height, camera.model_id).params;
-      camera.SetFocalLength(entry.estimate.focal_px);
-      entry.focal_px = entry.estimate.focal_px;
-      entry.applied = true;
-      if (entry.distortion.significant) {
-        entry.k1 = RadialTermForFocalLength(entry.distortion.kappa, entry.focal_px, radius_unit);
-        camera.params.at(radial_index) = entry.k1;
-        spdlog::info("self-calibration: camera {} radial term k1 {:.4f} (kappa {:.4f}: epipolar "
-                     "error {:.3f} px, {:.3f} px without, over {} pairs)",
-                     camera.camera_id, entry.k1, entry.distortion.kappa, entry.distortion.error_px,
-                     entry.distortion.error_px_without, entry.distortion.num_pairs_used);
-      }
-      calibrated[camera.camera_id] = &camera;
-      spdlog::info("self-calibration: camera {} focal length {:.1f} px (guess {:.1f}), spread "
-                   "{:.2f} %, {} of {} pairs agree ({} usable)",
-                   camera.camera_id, entry.focal_px, entry.initial_focal_px,
-                   100.0 * entry.estimate.spread, entry.estimate.num_pairs_inlier,
-                   entry.estimate.num_pairs, entry.estimate.num_pairs_used);
-    } else {
-      spdlog::warn("self-calibration: camera {} keeps its guessed focal length {:.1f} px: {}; "
-                   "bundle adjustment refines it, or pass --intrinsics",
-                   camera.camera_id, entry.initial_focal_px, entry.estimate.explanation);
-    }
-    report.cameras.push_back(std::move(entry));
+    const std::vector<const MapperPair*> pairs =
+        UncalibratedPairs(*input, camera.camera_id, frame_of, options.max_num_pairs);
+    report.cameras.push_back(CalibrateCamera(pairs, frame_of, options, &camera));
+    if (report.cameras.back().applied) calibrated[camera.camera_id] = &camera;
   }
-
+  // The relative poses of the pairs of calibrated cameras, again with the new intrinsics.
   if (!calibrated.empty()) {
     std::unordered_map<camera_t, const Camera*> cameras;
     for (const Camera& camera : input->cameras) cameras[camera.camera_id] = &camera;

@@ -2,7 +2,7 @@
 
 #include <gtest/gtest.h>
 
-#include "loopsfm/sfm/incremental_mapper.h"
+#include "loopsfm/loop/loop_closing.h"
 #include "loopsfm/sfm/sfm_test_problem.h"
 
 namespace loopsfm {
@@ -43,7 +43,7 @@ struct MapperRun {
 MapperRun Map(const MapperProblem& p, const IncrementalMapperOptions& options,
         const MapperCheckpointing& checkpointing = {}) {
   MapperRun run;
-  run.models = RunIncrementalMapper(p.input, options, &run.report, {}, checkpointing);
+  run.models = MapWithLoopClosing(p.input, options, &run.report, {}, checkpointing);
   return run;
 }
 

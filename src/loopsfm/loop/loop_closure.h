@@ -12,8 +12,9 @@
 // accepted only when it is supported by several consecutive registrations (each with
 // inliers of its own: ORB-SLAM's consecutive-coincidence test), most of its inliers do not
 // already agree as they are (points that missed merging by a few pixels are no loop to
-// close), and the correction it asks for is plausible as drift (small against the path walked between the two ends, scale
-// change within bounds), so a repeated facade does not close a false loop.
+// close), and the correction it asks for is plausible as drift (drift_correction.h: small
+// against the path walked between the two ends, scale change within bounds), so a repeated
+// facade does not close a false loop.
 //
 // Correction: a Sim3 pose graph (estimators/pose_graph.h) over all registered frames with
 // edges between consecutive frames and co-visible pairs (pairs that share points in the
@@ -22,10 +23,14 @@
 // (bundle, re-triangulation that merges points of one track that now agree, filtering)
 // fuses the two ends. Mapping then goes on from the consistent map.
 #include <deque>
+#include <map>
+#include <optional>
 #include <string>
 #include <unordered_map>
 #include <vector>
 
+#include "loopsfm/estimators/pose_graph.h"
+#include "loopsfm/loop/drift_correction.h"
 #include "loopsfm/math/random.h"
 #include "loopsfm/sfm/mapper_input.h"
 #include "loopsfm/sfm/mapper_options.h"
@@ -36,52 +41,6 @@
 namespace loopsfm {
 
 class MapperState;
-
-// The input without the pairs between frames min_frame_gap or more apart in capture order,
-// tracks rebuilt from the rest: what a mapper sees when the loop pairs are withheld.
-MapperInput WithoutLoopPairs(const MapperInput& input, int min_frame_gap);
-
-// Loop closing on a finished model, for loop pairs that come after mapping: the model's
-// frames and cameras are taken into a state over `input` (which holds the loop pairs), its
-// tracks are triangulated frame by frame in capture order (the two ends of a drifted loop
-// get points of their own), the frames are offered to the loop closer in capture order, and
-// a global refinement ends it. With loop closing disabled only the triangulation and the
-// refinement run: what a global bundle adjustment makes of the loop pairs on its own.
-Reconstruction CloseLoopsAfterMapping(const MapperInput& input, const Reconstruction& model,
-                                      const IncrementalMapperOptions& options,
-                                      MapperReport* report);
-
-// What a similarity old_from_recent asks of the recent end of a loop: how far it moves the
-// centre of `recent_frame`, also as a fraction of the path walked (registered frames in
-// capture order) between capture indices old_index and recent_index, its rotation and
-// scale; and whether that is plausible as drift under the options' bounds. Also how far the
-// camera turned along the way (angles between registered frames about ten captures apart,
-// summed, so shake does not add up).
-struct DriftCorrection {
-  double translation = 0.0;
-  double fraction_of_path = 0.0;
-  double rotation_deg = 0.0;
-  double scale = 1.0;
-  double turning_deg = 0.0;
-  bool plausible = false;
-  // A rotation that large a share of the turning is what intrinsics that are off make: a
-  // focal length e % off can measure turns up to about e % short or long, and a lap's turns
-  // add up (drift2, focal 5 % short: 18.6 deg over 411 deg). Other drift stays well under
-  // that, and so may a wrong focal length where the turns are made in place (block.mp4,
-  // focal 4 % long: 1.3 to 2.0 deg over 360 deg, no warning).
-  bool SuggestsWrongIntrinsics() const {
-    return turning_deg >= 90.0 && rotation_deg >= 0.02 * turning_deg;
-  }
-};
-DriftCorrection MeasureCorrection(const Reconstruction& reconstruction, const MapperInput& input,
-                                  const Sim3d& old_from_recent, image_t recent_frame,
-                                  int old_index, int recent_index,
-                                  const LoopClosureOptions& options);
-
-// Keeps the path of `reconstruction` in report->path_before_loop_closing unless a path is
-// kept there already (the first correction's "before").
-void KeepPathBeforeLoopClosing(const MapperInput& input, const Reconstruction& reconstruction,
-                               MapperReport* report);
 
 class LoopCloser {
  public:
@@ -133,7 +92,39 @@ class LoopCloser {
     point3D_t recent_id = kInvalidPoint3DId;
   };
 
+  // A similarity old_from_recent the window's evidence agrees on: all its correspondences,
+  // the window registration each came from, and the inliers of each registration.
+  struct Hypothesis {
+    std::vector<PointCorrespondence> all;
+    std::vector<size_t> frame_of;
+    PointAlignment alignment;
+    std::vector<int> frame_inliers;
+    // The median capture index of the old frames that see the inliers' old points.
+    int MedianOldIndex(const std::unordered_map<image_t, int>& frame_index) const;
+  };
+
+  // A loop's pose-graph edges, the inlier point pairs behind each, and all its inlier pairs
+  // (to be fused).
+  struct LoopEdges {
+    std::vector<LoopEdge> edges;
+    std::vector<int> num_point_pairs;
+    std::vector<PointPair> inlier_pairs;
+  };
+
   bool DetectAndClose(MapperState& model, image_t image_id, MapperReport* report);
+  // Steps of DetectAndClose. UpdateWindow adds the registration to the window and returns
+  // the window's evidence, oldest first, once it is full and no cooldown holds (empty
+  // otherwise). Align finds the similarity they agree on, if they do and it is no loop
+  // closed already. EdgesOf turns it into pose-graph edges. CorrectOrGather corrects the
+  // model (or, without refine, gathers the edges) and reports the loop.
+  std::vector<Evidence> UpdateWindow(const MapperState& model, image_t image_id);
+  std::optional<Hypothesis> Align(const std::vector<Evidence>& window);
+  void WarnIfIntrinsicsLookWrong(const MapperState& model, image_t image_id,
+                                 const DriftCorrection& correction);
+  LoopEdges EdgesOf(const Reconstruction& rec, const std::vector<Evidence>& window,
+                    const Hypothesis& loop) const;
+  bool CorrectOrGather(MapperState& model, const LoopEdges& edges, ClosedLoop loop,
+                       MapperReport* report);
   void ClearWindow() {
     window_.clear();
     window_evidence_.clear();
@@ -144,6 +135,12 @@ class LoopCloser {
   // re-triangulated and, with refine_, the model refined. False when the graph failed.
   bool Close(MapperState& model, const std::vector<LoopEdge>& loop_edges, double loop_weight,
              const std::vector<PointPair>& fuse, MapperReport* report);
+  // Steps of Close: the graph's nodes (the registered frames, also listed in capture order
+  // in `ordered`) and edges; the map moved to the optimised nodes from the poses `before`.
+  void BuildPoseGraph(const MapperState& model, const std::vector<LoopEdge>& loop_edges,
+                      double loop_weight, PoseGraph* graph, std::vector<image_t>* ordered) const;
+  void MoveWithGraph(const PoseGraph& graph, const std::map<image_t, Sim3d>& before,
+                     Reconstruction* rec) const;
 
   const MapperInput& input_;
   const LoopClosureOptions& options_;

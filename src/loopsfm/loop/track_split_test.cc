@@ -1,4 +1,4 @@
-#include "loopsfm/sfm/track_split.h"
+#include "loopsfm/loop/track_split.h"
 
 #include <gtest/gtest.h>
 
@@ -13,10 +13,8 @@ using testing::RegisterWithDrift;
 using testing::WalkOutAndBack;
 
 IncrementalMapperOptions SplitOptions() {
-  IncrementalMapperOptions options;
+  IncrementalMapperOptions options = testing::LoopOptions();
   options.loop_closure.method = LoopClosingMethod::kSplit;
-  options.loop_closure.min_frame_gap = 20;
-  options.num_threads = 1;
   return options;
 }
 

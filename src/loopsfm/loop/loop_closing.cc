@@ -1,0 +1,141 @@
+#include "loopsfm/loop/loop_closing.h"
+
+#include <cstdlib>
+#include <unordered_map>
+
+#include "loopsfm/loop/loop_closure.h"
+#include "loopsfm/loop/track_split.h"
+#include "loopsfm/sfm/mapper_state.h"
+#include "loopsfm/tracks/track_builder.h"
+#include "loopsfm/util/logging.h"
+#include "loopsfm/util/timer.h"
+
+namespace loopsfm {
+
+namespace {
+
+// Loop closing as the mapper's hook: the pose-graph loop closer after each registration,
+// the split tracks of the largest model at the end.
+class LoopClosingHook : public MapperHook {
+ public:
+  LoopClosingHook(const MapperInput& input, const IncrementalMapperOptions& options)
+      : options_(options), closer_(input, options.loop_closure, options.seed + 1) {}
+
+  bool AfterRegistration(MapperState& model, image_t image_id, MapperReport* report) override {
+    return options_.loop_closure.CloseWhileMapping() &&
+           closer_.AfterRegistration(model, image_id, report);
+  }
+
+  void AfterMapping(MapperState& largest, MapperReport* report) override {
+    if (!options_.loop_closure.SplitTracks()) return;
+    Random random(options_.seed + 2);
+    CloseLoopsBySplitTracks(largest, options_.loop_closure, random, report);
+  }
+
+  void Save(MapperCheckpoint* checkpoint) const override { closer_.Save(checkpoint); }
+  void Restore(const MapperCheckpoint& checkpoint) override { closer_.Restore(checkpoint); }
+
+ private:
+  const IncrementalMapperOptions& options_;
+  LoopCloser closer_;
+};
+
+std::vector<Reconstruction> Map(const MapperInput& input, const IncrementalMapperOptions& options,
+                                MapperReport* report, const MapperProgress& progress,
+                                const MapperCheckpointing& checkpointing) {
+  LoopClosingHook hook(input, options);
+  return RunIncrementalMapper(input, options, report, progress, checkpointing, &hook);
+}
+
+}  // namespace
+
+MapperInput WithoutLoopPairs(const MapperInput& input, int min_frame_gap) {
+  std::unordered_map<image_t, int> index;
+  std::unordered_map<image_t, size_t> num_points2D;
+  for (size_t i = 0; i < input.frames.size(); ++i) {
+    index[input.frames[i].image_id] = static_cast<int>(i);
+    num_points2D[input.frames[i].image_id] = input.frames[i].points2D.size();
+  }
+  MapperInput withheld;
+  withheld.cameras = input.cameras;
+  withheld.frames = input.frames;
+  for (const MapperPair& pair : input.pairs) {
+    if (std::abs(index.at(pair.pair.image_id1) - index.at(pair.pair.image_id2)) < min_frame_gap) {
+      withheld.pairs.push_back(pair);
+    }
+  }
+  std::vector<VerifiedPairMatches> verified;
+  for (const MapperPair& pair : withheld.pairs) {
+    verified.push_back({pair.pair, &pair.geometry.inlier_matches});
+  }
+  withheld.tracks = BuildTracks(num_points2D, verified, {}, nullptr);
+  return withheld;
+}
+
+Reconstruction CloseLoopsAfterMapping(const MapperInput& input, const Reconstruction& model,
+                                      const IncrementalMapperOptions& options,
+                                      MapperReport* report) {
+  Timer timer;
+  MapperState state(input, options);
+  Reconstruction& rec = state.reconstruction();
+  for (const auto& [id, camera] : model.Cameras()) rec.GetCamera(id) = camera;
+  std::vector<image_t> ordered;
+  for (const MapperFrame& frame : input.frames) {
+    if (!model.ExistsImage(frame.image_id) || !model.IsRegistered(frame.image_id)) continue;
+    rec.GetImage(frame.image_id).cam_from_world = model.GetImage(frame.image_id).cam_from_world;
+    rec.RegisterImage(frame.image_id);
+    ordered.push_back(frame.image_id);
+  }
+  if (ordered.size() < 2) return model;
+  state.SetGauge(ordered[0], ordered[1]);
+  for (image_t id : ordered) state.TriangulateImage(id);
+  const double seconds_triangulation = timer.ElapsedSeconds();
+  report->seconds_triangulation += seconds_triangulation;
+  const LoopClosureOptions& loop = options.loop_closure;
+  bool corrected = false;
+  if (loop.CloseWhileMapping()) {
+    LoopCloser closer(input, loop, options.seed + 1, /*refine=*/false);
+    for (image_t id : ordered) closer.AfterRegistration(state, id, report);
+    corrected = closer.CloseGathered(state, report);
+  }
+  // Split tracks start from a refined map after the pose graph, from the map as triangulated
+  // without it; their pass ends with a bundle of its own.
+  if (corrected) {
+    state.RefineAfterCorrection(report, loop.refine_function_tolerance);
+  } else if (!loop.SplitTracks() || loop.CloseWhileMapping()) {
+    state.GlobalRefinement(report);
+  }
+  if (loop.SplitTracks()) {
+    Random split_random(options.seed + 2);
+    const int tied = CloseLoopsBySplitTracks(state, loop, split_random, report);
+    if (tied == 0 && !loop.CloseWhileMapping()) state.GlobalRefinement(report);
+  }
+  spdlog::info("loop pairs added after mapping: {} loops closed, {:.1f} s",
+               report->loops_closed.size(), timer.ElapsedSeconds());
+  return rec;
+}
+
+std::vector<Reconstruction> MapWithLoopClosing(const MapperInput& input,
+                                               const IncrementalMapperOptions& options,
+                                               MapperReport* report,
+                                               const MapperProgress& progress,
+                                               const MapperCheckpointing& checkpointing) {
+  options.Check();
+  MapperReport local;
+  MapperReport* out = report ? report : &local;
+  if (!options.loop_closure.withhold_loop_pairs) {
+    return Map(input, options, out, progress, checkpointing);
+  }
+  const MapperInput withheld = WithoutLoopPairs(input, options.loop_closure.min_frame_gap);
+  spdlog::info("mapper: {} loop pairs withheld until the end ({} pairs, {} tracks left)",
+               input.pairs.size() - withheld.pairs.size(), withheld.pairs.size(),
+               withheld.tracks.size());
+  IncrementalMapperOptions mapping = options;
+  mapping.loop_closure.withhold_loop_pairs = false;
+  mapping.loop_closure.method = LoopClosingMethod::kNone;  // no loop pairs to close yet
+  std::vector<Reconstruction> models = Map(withheld, mapping, out, progress, checkpointing);
+  if (!models.empty()) models[0] = CloseLoopsAfterMapping(input, models[0], options, out);
+  return models;
+}
+
+}  // namespace loopsfm
