@@ -13,6 +13,9 @@
 namespace loopsfm::cli {
 namespace {
 
+std::string IncrementalMapperSummary(const MapperReport& m);
+std::string GlobalMapperSummary(const GlobalMapperReport& g, const MapperReport& m);
+
 void PrintSummary(const ReconstructReport& report) {
   std::string out = "\n";
   out += fmt::format("{:<28}{}\n", "frames", report.num_frames);
@@ -71,7 +74,18 @@ void PrintSummary(const ReconstructReport& report) {
   for (const StageTime& t : report.stage_times) {
     out += fmt::format("{:<28}{:.1f} s\n", "time " + t.stage, t.seconds);
   }
-  const MapperReport& m = report.mapper;
+  if (report.global_mapper) {
+    out += GlobalMapperSummary(*report.global_mapper, report.mapper);
+  } else {
+    out += IncrementalMapperSummary(report.mapper);
+  }
+  out += fmt::format("{:<28}{:.1f} s, peak memory {:.0f} MiB\n", "total", report.total_seconds,
+                     report.peak_memory_bytes / 1048576.0);
+  std::fputs(out.c_str(), stdout);
+}
+
+std::string IncrementalMapperSummary(const MapperReport& m) {
+  std::string out;
   out += fmt::format("{:<28}registration {:.1f} s, triangulation {:.1f} s, {} local BA {:.1f} s, "
                      "{} global BA {:.1f} s, merging {:.1f} s, checkpoints {:.1f} s\n",
                      "  of which", m.seconds_registration, m.seconds_triangulation, m.num_local_ba,
@@ -120,9 +134,29 @@ void PrintSummary(const ReconstructReport& report) {
                        100.0 * loop.correction_fraction_of_path, loop.correction_rotation_deg,
                        loop.correction_scale, seconds);
   }
-  out += fmt::format("{:<28}{:.1f} s, peak memory {:.0f} MiB\n", "total", report.total_seconds,
-                     report.peak_memory_bytes / 1048576.0);
-  std::fputs(out.c_str(), stdout);
+  return out;
+}
+
+std::string GlobalMapperSummary(const GlobalMapperReport& g, const MapperReport& m) {
+  std::string out;
+  out += fmt::format("{:<28}{} edges, {} dropped around triangles, {} outside the largest "
+                     "component ({} nodes)\n",
+                     "  view graph", g.num_view_graph_edges, g.view_graph.num_dropped_by_triangles,
+                     g.view_graph.num_dropped_outside_component, g.view_graph.num_nodes);
+  out += fmt::format("{:<28}{} frames, {} L1 and {} robust iterations, {} edges off by more "
+                     "than their bound, {} frames left without an edge\n",
+                     "  rotation averaging", g.rotations.num_nodes, g.rotations.num_l1_iterations,
+                     g.rotations.num_iterations, g.num_rotation_outliers,
+                     g.num_frames_without_edges);
+  out += fmt::format("{:<28}{} frames, {} tracks, {} observations, {} iterations{}\n",
+                     "  global positioning", g.positioning.num_cameras, g.num_tracks_positioned,
+                     g.positioning.num_observations, g.positioning.num_iterations,
+                     g.positioning.success ? "" : " (failed: " + g.positioning.termination + ")");
+  out += fmt::format("{:<28}{} global BA {:.1f} s, triangulation {:.1f} s; {} of {} frames in the "
+                     "model, {} dropped for seeing too few points\n",
+                     "  structure", m.num_global_ba, m.seconds_global_ba, g.seconds_triangulation,
+                     g.num_registered, g.num_frames, g.num_frames_dropped);
+  return out;
 }
 
 }  // namespace
@@ -137,6 +171,7 @@ void AddReconstructCommand(CLI::App& app) {
     std::string groundtruth;
     bool no_self_calibration = false;
     std::string refine;
+    std::string mapper = "incremental";
     std::string loop_closing = "posegraph";
     bool withhold_loop_pairs = false;
     bool alternate_poses = false;
@@ -174,14 +209,20 @@ void AddReconstructCommand(CLI::App& app) {
   cmd->add_flag("--no-self-calibration", flags->no_self_calibration,
                 "Without --intrinsics, start mapping from the guessed focal length (1.2 x the "
                 "image size) instead of estimating it from the pairs' fundamental matrices");
-  cmd->add_option("--loop-closing", flags->loop_closing,
+  cmd->add_option("--mapper", flags->mapper,
+                      "incremental: frames registered one by one, with loop closing and "
+                      "checkpoints | global: every camera at once (view-graph cleaning, rotation "
+                      "averaging, global positioning of cameras and points, bundle adjustment); "
+                      "loops are closed by the loop pairs in the view graph; no checkpoints")
+          ->capture_default_str();
+  CLI::Option* loop_closing = cmd->add_option("--loop-closing", flags->loop_closing,
                   "posegraph: when the camera returns after drift, correct the map while mapping "
                   "(Sim3 pose graph, then the two ends' points are fused) | split: after "
                   "mapping, tie the two ends of split tracks together in a bundle adjustment "
                   "(depth-normalised point constraints) | both: posegraph, then split | none: "
                   "map without loop closing")
       ->capture_default_str();
-  cmd->add_flag("--withhold-loop-pairs", flags->withhold_loop_pairs,
+  CLI::Option* withhold = cmd->add_flag("--withhold-loop-pairs", flags->withhold_loop_pairs,
                 "Evaluation: map without the pairs between frames 50 or more apart, then add "
                 "them and close the loops at the end (drift grows unchecked until then; compare "
                 "with --loop-closing none)");
@@ -207,24 +248,41 @@ void AddReconstructCommand(CLI::App& app) {
                 "Start again: delete OUT/database.db and OUT/mapper_checkpoint.bin first instead "
                 "of resuming from them (needed when the input or the extract / match options "
                 "changed since they were made)");
-  cmd->add_option("--checkpoint-every", flags->checkpoint_every,
+  CLI::Option* checkpoint_every = cmd->add_option("--checkpoint-every", flags->checkpoint_every,
                   "Save the mapping state to OUT/mapper_checkpoint.bin every this many seconds "
                   "and when mapping ends; a rerun after an interruption goes on from it (and "
                   "one after a finished run skips mapping). 0: no checkpoints")
       ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
   cmd->add_option("--seed", flags->seed,
-                  "Seed of the mapper's random sampling (registration RANSAC, loop closing): "
+                  "Seed of the mapper's random sampling (registration RANSAC, loop closing; the "
+                  "global mapper's starting positions): "
                   "a rerun with the same seed repeats the model; other seeds show how much a "
                   "result owes to chance. Matching keeps its own seed")
       ->capture_default_str();
-  cmd->add_flag("--alternate-poses", flags->alternate_poses,
+  CLI::Option* alternate_poses = cmd->add_flag("--alternate-poses", flags->alternate_poses,
                 "Diagnostic: after each registration, a second RANSAC over the correspondences "
                 "the first rejected; writes OUT/registrations.csv (both rounds' inliers, and "
                 "where a second plausible pose was found, how far it is) and plots the two "
                 "rounds' inlier ratios in report.html. Does not change the mapping");
-  cmd->callback([flags, fill_in_rounds] {
+  cmd->callback([=] {
     ReconstructOptions options;
+    if (flags->mapper == "global") {
+      for (const CLI::Option* option : {loop_closing, withhold, checkpoint_every, alternate_poses}) {
+        if (option->count() > 0) {
+          throw InvalidArgument(fmt::format(
+              "{} is an option of the incremental mapper; the global mapper closes loops "
+              "through the loop pairs in its view graph and has no checkpoints yet: leave it "
+              "out, or use --mapper incremental",
+              option->get_name()));
+        }
+      }
+      options.mapper_kind = MapperKind::kGlobal;
+    } else if (flags->mapper != "incremental") {
+      throw InvalidArgument(fmt::format("--mapper '{}' is not a mapper; use incremental (the "
+                                        "default) or global",
+                                        flags->mapper));
+    }
     options.extract = flags->extract.Resolve();
     if (fill_in_rounds->count() > 0 && options.extract.keyframes.mode == KeyframeMode::kWindows) {
       throw InvalidArgument("--fill-in-rounds fills gaps between adaptive keyframes: it cannot be "

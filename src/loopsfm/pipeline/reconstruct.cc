@@ -27,7 +27,12 @@ void ReconstructOptions::Check() const {
   match.Check();
   self_calibration.Check();
   mapper.Check();
+  global_mapper.Check();
   output.Check();
+}
+
+std::string MapperKindName(MapperKind kind) {
+  return kind == MapperKind::kGlobal ? "global" : "incremental";
 }
 
 MapperInput LoadMapperInput(const Database& database, TrackBuildReport* tracks_report) {
@@ -185,6 +190,28 @@ void FillInGaps(const fs::path& input, Database& database, const ReconstructOpti
   }
 }
 
+namespace {
+
+// The global mapper on the mapper input; its stages' times go to the report's stage times.
+std::vector<Reconstruction> MapGlobally(const MapperInput& mapper_input,
+                                        const ReconstructOptions& options, int pass,
+                                        ReconstructReport* report) {
+  report->global_mapper.emplace();
+  std::vector<Reconstruction> models = RunGlobalMapper(
+      mapper_input, options.mapper, options.global_mapper, &*report->global_mapper,
+      &report->mapper);
+  const GlobalMapperReport& g = *report->global_mapper;
+  const std::string suffix = pass == 0 ? "" : " (again)";
+  report->stage_times.push_back({"map: view graph" + suffix, g.seconds_view_graph});
+  report->stage_times.push_back({"map: rotations" + suffix, g.seconds_rotations});
+  report->stage_times.push_back({"map: positions" + suffix, g.seconds_positioning});
+  report->stage_times.push_back(
+      {"map: structure" + suffix, g.seconds_triangulation + g.seconds_bundles});
+  return models;
+}
+
+}  // namespace
+
 ReconstructReport Reconstruct(const fs::path& input, const fs::path& output_dir,
                               const ReconstructOptions& options) {
   options.Check();
@@ -260,7 +287,9 @@ ReconstructReport Reconstruct(const fs::path& input, const fs::path& output_dir,
     }
 
     stage.Restart();
-    {
+    if (options.mapper_kind == MapperKind::kGlobal) {
+      models = MapGlobally(mapper_input, options, pass, &report);
+    } else {
       nlohmann::json fingerprint;  // digests the whole mapper input: only with checkpoints
       std::optional<MapperCheckpoint> resume;
       MapperCheckpointing checkpointing;
@@ -276,8 +305,8 @@ ReconstructReport Reconstruct(const fs::path& input, const fs::path& output_dir,
       Progress progress("map", mapper_input.frames.size(), options.show_progress);
       models = MapWithLoopClosing(mapper_input, options.mapper, &report.mapper,
                                   [&](size_t, size_t) { progress.Advance(); }, checkpointing);
+      report.stage_times.push_back({pass == 0 ? "map" : "map-again", stage.ElapsedSeconds()});
     }
-    report.stage_times.push_back({pass == 0 ? "map" : "map-again", stage.ElapsedSeconds()});
     // Once per database: a rerun (which maps the fill-ins from the start) adds no more.
     if (pass > 0 || !adaptive || database.ReadMeta("fill_in_after_mapping")) break;
     stage.Restart();
@@ -332,7 +361,8 @@ ReconstructReport Reconstruct(const fs::path& input, const fs::path& output_dir,
   // The frames loop closing tied together, for plots (`loopsfm eval --plot-links`); none
   // from an earlier run is left behind when this one does not close loops.
   const fs::path links_path = output_dir / "loop_links.txt";
-  if (options.mapper.loop_closure.method != LoopClosingMethod::kNone) {
+  if (options.mapper_kind == MapperKind::kIncremental &&
+      options.mapper.loop_closure.method != LoopClosingMethod::kNone) {
     WriteLoopLinksFile(links_path, report.mapper.loop_links);
     report.output.written.push_back(links_path);
   } else {

@@ -9,6 +9,7 @@
 
 #include <filesystem>
 #include <functional>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -16,10 +17,15 @@
 #include "loopsfm/pipeline/extract.h"
 #include "loopsfm/pipeline/localize.h"
 #include "loopsfm/pipeline/match.h"
+#include "loopsfm/sfm/global_mapper.h"
 #include "loopsfm/sfm/incremental_mapper.h"
 #include "loopsfm/sfm/self_calibration.h"
 
 namespace loopsfm {
+
+enum class MapperKind { kIncremental, kGlobal };
+// "incremental" or "global".
+std::string MapperKindName(MapperKind kind);
 
 struct ReconstructOptions {
   ExtractOptions extract;
@@ -36,7 +42,12 @@ struct ReconstructOptions {
   // Estimate the focal length of cameras without --intrinsics before mapping.
   bool self_calibrate = true;
   SelfCalibrationOptions self_calibration;
+  // Which mapper builds the models: the incremental one (with loop closing and checkpoints)
+  // or the global one (sfm/global_mapper.h), which uses `mapper`'s bundle, triangulation and
+  // filtering settings and has no checkpoints yet.
+  MapperKind mapper_kind = MapperKind::kIncremental;
   IncrementalMapperOptions mapper;
+  GlobalMapperOptions global_mapper;
   // What is written after mapping.
   ExportOptions output;
   // Start again: delete OUT/database.db (and its journal) before the run, instead of
@@ -84,6 +95,8 @@ struct ReconstructReport {
   TrackBuildReport tracks;
   SelfCalibrationReport self_calibration;
   MapperReport mapper;
+  // With the global mapper: its stages.
+  std::optional<GlobalMapperReport> global_mapper;
   // What the export wrote, with a summary of each model.
   ExportReport output;
   std::vector<StageTime> stage_times;

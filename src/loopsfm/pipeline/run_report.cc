@@ -89,6 +89,7 @@ nlohmann::json RunReportData(const ReconstructReport& report,
   size_t registered = 0;
   for (const Reconstruction& model : models) registered += model.NumRegImages();
   data["summary"] = {{"frames", report.num_frames},
+                     {"mapper", report.global_mapper ? "global" : "incremental"},
                      {"registered", registered},
                      {"models", models.size()},
                      {"total_seconds", report.total_seconds},

@@ -18,6 +18,7 @@ function header(data) {
     ['registered', isNumber(s.registered) && isNumber(s.frames) && s.frames > 0
       ? `${fmt(s.registered)} (${fmt((100 * s.registered) / s.frames, 1)} %)` : fmt(s.registered)],
     ['models', fmt(s.models)],
+    ['mapper', s.mapper || null],
     ['3D points', fmt(s.points)],
     ['mean track length', fmt(s.mean_track_length, 2)],
     ['reprojection error', isNumber(s.reprojection_error_px) ? `${fmt(s.reprojection_error_px, 3)} px` : null],

@@ -1,0 +1,267 @@
+#include "loopsfm/sfm/global_mapper.h"
+
+#include <algorithm>
+#include <map>
+#include <unordered_map>
+#include <utility>
+
+#include "loopsfm/sfm/mapper_state.h"
+#include "loopsfm/util/errors.h"
+#include "loopsfm/util/logging.h"
+#include "loopsfm/util/timer.h"
+
+namespace loopsfm {
+
+void GlobalMapperOptions::Check() const {
+  view_graph.Check();
+  rotation_averaging.Check();
+  positioning.Check();
+  LOOPSFM_REQUIRE_OPTION(max_rotation_error_deg > 0.0,
+                         "global mapper max_rotation_error_deg must be positive, got {}",
+                         max_rotation_error_deg);
+  LOOPSFM_REQUIRE_OPTION(min_track_length >= 2,
+                         "global mapper min_track_length must be at least 2, got {}",
+                         min_track_length);
+  LOOPSFM_REQUIRE_OPTION(max_tracks_per_frame > 0,
+                         "global mapper max_tracks_per_frame must be positive, got {}",
+                         max_tracks_per_frame);
+  LOOPSFM_REQUIRE_OPTION(num_refinement_rounds >= 1,
+                         "global mapper num_refinement_rounds must be at least 1, got {}",
+                         num_refinement_rounds);
+  LOOPSFM_REQUIRE_OPTION(min_frame_points >= 0,
+                         "global mapper min_frame_points must not be negative, got {}",
+                         min_frame_points);
+}
+
+namespace {
+
+using Rotations = std::map<image_t, Eigen::Quaterniond>;
+
+bool HasRelativePose(const TwoViewGeometry& geometry) {
+  switch (geometry.config) {
+    case TwoViewGeometry::kCalibrated:
+    case TwoViewGeometry::kUncalibrated:
+    case TwoViewGeometry::kPlanar:
+    case TwoViewGeometry::kPanoramic: return true;
+    default: return false;
+  }
+}
+
+// One edge per verified pair with a relative pose, weighted by its inliers.
+std::vector<RelativeRotation> ViewGraphEdges(const MapperInput& input) {
+  std::vector<RelativeRotation> edges;
+  for (const MapperPair& pair : input.pairs) {
+    if (!pair.geometry.IsVerified() || !HasRelativePose(pair.geometry)) continue;
+    edges.push_back({pair.pair.image_id1, pair.pair.image_id2,
+                     pair.geometry.cam2_from_cam1.rotation,
+                     static_cast<double>(pair.geometry.inlier_matches.size())});
+  }
+  return edges;
+}
+
+// Stages 1 and 2: the view graph cleaned, and the rotations of its frames.
+Rotations EstimateRotations(const MapperInput& input, const GlobalMapperOptions& options,
+                            GlobalMapperReport* report) {
+  Timer timer;
+  const std::vector<RelativeRotation> edges = ViewGraphEdges(input);
+  report->num_view_graph_edges = static_cast<int>(edges.size());
+  const ViewGraphCleaningResult cleaned = CleanViewGraph(edges, options.view_graph);
+  report->view_graph = cleaned.report;
+  std::vector<RelativeRotation> kept;
+  for (const int e : cleaned.kept_edges) kept.push_back(edges[e]);
+  report->seconds_view_graph = timer.ElapsedSeconds();
+
+  timer.Restart();
+  const RotationAveragingResult averaged = AverageRotations(kept, options.rotation_averaging);
+  report->rotations = averaged.report;
+  report->rotations.edge_residual_deg.clear();  // per edge: not for the report
+  std::unordered_map<image_t, int> good_edges;
+  for (size_t e = 0; e < kept.size(); ++e) {
+    const double residual = averaged.report.edge_residual_deg[e];
+    if (residual < 0.0) continue;
+    if (residual > options.max_rotation_error_deg) {
+      ++report->num_rotation_outliers;
+      continue;
+    }
+    ++good_edges[kept[e].node1];
+    ++good_edges[kept[e].node2];
+  }
+  Rotations rotations;
+  for (const auto& [id, rotation] : averaged.cam_from_world) {
+    if (good_edges.count(id) > 0) {
+      rotations[id] = rotation;
+    } else {
+      ++report->num_frames_without_edges;
+    }
+  }
+  report->seconds_rotations = timer.ElapsedSeconds();
+  spdlog::info("global mapper: view graph {} edges, {} dropped around triangles, {} outside the "
+               "largest component; rotations of {} frames, {} edges disagree by more than "
+               "{:.0f} deg, {:.1f} s",
+               edges.size(), cleaned.report.num_dropped_by_triangles,
+               cleaned.report.num_dropped_outside_component, rotations.size(),
+               report->num_rotation_outliers, options.max_rotation_error_deg,
+               report->seconds_view_graph + report->seconds_rotations);
+  return rotations;
+}
+
+// Stage 3's input: the bearings of the tracks chosen (see GlobalMapperOptions), each track's
+// index standing for its point.
+GlobalPositioningInput PositioningInput(const MapperInput& input, const Rotations& rotations,
+                                        const GlobalMapperOptions& options, int* num_tracks) {
+  std::unordered_map<image_t, const MapperFrame*> frame_of;
+  for (const MapperFrame& frame : input.frames) frame_of[frame.image_id] = &frame;
+  std::unordered_map<camera_t, const Camera*> camera_of;
+  for (const Camera& camera : input.cameras) camera_of[camera.camera_id] = &camera;
+  std::vector<std::pair<int, size_t>> candidates;  // (-frames in the model, track)
+  for (size_t t = 0; t < input.tracks.size(); ++t) {
+    int length = 0;
+    for (const TrackElement& el : input.tracks[t].elements) length += rotations.count(el.image_id);
+    if (length >= options.min_track_length) candidates.push_back({-length, t});
+  }
+  std::sort(candidates.begin(), candidates.end());
+  GlobalPositioningInput positioning;
+  positioning.cam_from_world_rotations = rotations;
+  std::unordered_map<image_t, int> taken;
+  *num_tracks = 0;
+  for (const auto& [length, t] : candidates) {
+    const std::vector<TrackElement>& elements = input.tracks[t].elements;
+    const bool wanted = std::any_of(elements.begin(), elements.end(), [&](const TrackElement& el) {
+      return rotations.count(el.image_id) > 0 && taken[el.image_id] < options.max_tracks_per_frame;
+    });
+    if (!wanted) continue;
+    ++*num_tracks;
+    for (const TrackElement& el : elements) {
+      if (rotations.count(el.image_id) == 0) continue;
+      ++taken[el.image_id];
+      const MapperFrame& frame = *frame_of.at(el.image_id);
+      const Eigen::Vector2d xy =
+          camera_of.at(frame.camera_id)->CamFromImg(frame.points2D.at(el.point2D_idx));
+      positioning.observations.push_back(
+          {el.image_id, static_cast<point3D_t>(t), Eigen::Vector3d(xy.x(), xy.y(), 1.0)});
+    }
+  }
+  return positioning;
+}
+
+// Frames seeing fewer than min_frame_points points leave the model; returns how many. The
+// gauge moves to the first two frames left where it was on one of them.
+int DropWeakFrames(const std::vector<image_t>& ordered, int min_frame_points,
+                   MapperState* state) {
+  Reconstruction& rec = state->reconstruction();
+  int dropped = 0;
+  std::vector<image_t> left;
+  for (const image_t id : ordered) {
+    if (!rec.IsRegistered(id)) continue;
+    if (static_cast<int>(rec.GetImage(id).num_points3D) < min_frame_points) {
+      rec.DeRegisterImage(id);
+      ++dropped;
+    } else {
+      left.push_back(id);
+    }
+  }
+  if (left.size() >= 2 && (!rec.IsRegistered(state->GaugeFirst()) ||
+                           !rec.IsRegistered(state->GaugeSecond()))) {
+    state->SetGauge(left[0], left[1]);
+  }
+  return dropped;
+}
+
+// Stage 4: the model at the positioned poses, its tracks triangulated and refined.
+std::vector<Reconstruction> BuildModel(const MapperInput& input,
+                                       const IncrementalMapperOptions& mapper_options,
+                                       const GlobalMapperOptions& options,
+                                       const std::map<image_t, Rigid3d>& poses,
+                                       GlobalMapperReport* report, MapperReport* mapper_report) {
+  MapperState state(input, mapper_options);
+  Reconstruction& rec = state.reconstruction();
+  std::vector<image_t> ordered;  // capture order
+  for (const MapperFrame& frame : input.frames) {
+    const auto pose = poses.find(frame.image_id);
+    if (pose == poses.end()) continue;
+    rec.GetImage(frame.image_id).cam_from_world = pose->second;
+    rec.RegisterImage(frame.image_id);
+    ordered.push_back(frame.image_id);
+  }
+  if (ordered.size() < 2) return {};
+  state.SetGauge(ordered[0], ordered[1]);
+  Timer timer;
+  state.RetriangulateAll();
+  state.FilterPoints({});
+  report->seconds_triangulation = timer.ElapsedSeconds();
+  timer.Restart();
+  for (int round = 0; round < options.num_refinement_rounds; ++round) {
+    state.GlobalRefinement(mapper_report);
+  }
+  report->num_frames_dropped = DropWeakFrames(ordered, options.min_frame_points, &state);
+  if (report->num_frames_dropped > 0 && rec.NumRegImages() >= 2) {
+    state.GlobalRefinement(mapper_report);
+  }
+  report->seconds_bundles = timer.ElapsedSeconds();
+  if (rec.NumRegImages() < 2) return {};
+  rec.UpdateReprojectionErrors();
+  std::vector<Reconstruction> models;
+  models.push_back(std::move(rec));
+  return models;
+}
+
+}  // namespace
+
+std::vector<Reconstruction> RunGlobalMapper(const MapperInput& input,
+                                            const IncrementalMapperOptions& mapper_options,
+                                            const GlobalMapperOptions& options,
+                                            GlobalMapperReport* report,
+                                            MapperReport* mapper_report) {
+  mapper_options.Check();
+  options.Check();
+  GlobalMapperReport local_report;
+  MapperReport local_mapper_report;
+  if (!report) report = &local_report;
+  if (!mapper_report) mapper_report = &local_mapper_report;
+  *report = {};
+  report->num_frames = static_cast<int>(input.frames.size());
+
+  const Rotations rotations = EstimateRotations(input, options, report);
+  if (rotations.size() < 2) {
+    spdlog::warn("global mapper: fewer than two frames are linked by verified pairs that agree; "
+                 "no model");
+    return {};
+  }
+
+  Timer timer;
+  GlobalPositioningInput positioning_input =
+      PositioningInput(input, rotations, options, &report->num_tracks_positioned);
+  GlobalPositioningOptions positioning_options = options.positioning;
+  positioning_options.num_threads = mapper_options.num_threads;
+  positioning_options.seed = mapper_options.seed;
+  const GlobalPositioningResult positioned =
+      SolveGlobalPositioning(positioning_input, positioning_options);
+  report->positioning = positioned.report;
+  report->seconds_positioning = timer.ElapsedSeconds();
+  spdlog::info("global mapper: positions of {} frames and {} tracks ({} observations), {} "
+               "iterations, {:.1f} s{}",
+               positioned.camera_centres.size(), positioned.points.size(),
+               positioned.report.num_observations, positioned.report.num_iterations,
+               report->seconds_positioning,
+               positioned.report.success ? "" : ": " + positioned.report.termination);
+  if (!positioned.report.success || positioned.camera_centres.size() < 2) {
+    spdlog::warn("global mapper: global positioning failed ({}); no model",
+                 positioned.report.termination);
+    return {};
+  }
+
+  const std::map<image_t, Rigid3d> poses =
+      CamFromWorldFromCentres(rotations, positioned.camera_centres);
+  std::vector<Reconstruction> models =
+      BuildModel(input, mapper_options, options, poses, report, mapper_report);
+  report->num_registered = models.empty() ? 0 : static_cast<int>(models[0].NumRegImages());
+  mapper_report->num_registered = report->num_registered;
+  mapper_report->num_models = static_cast<int>(models.size());
+  spdlog::info("global mapper: {} of {} frames in the model ({} dropped for too few points), "
+               "triangulation {:.1f} s, bundles {:.1f} s",
+               report->num_registered, report->num_frames, report->num_frames_dropped,
+               report->seconds_triangulation, report->seconds_bundles);
+  return models;
+}
+
+}  // namespace loopsfm

@@ -1,0 +1,34 @@
+#pragma once
+// The options of the global mapper (global_mapper.h).
+
+#include "loopsfm/estimators/global_positioning.h"
+#include "loopsfm/estimators/rotation_averaging.h"
+#include "loopsfm/matching/view_graph_cleaning.h"
+
+namespace loopsfm {
+
+struct GlobalMapperOptions {
+  // Stage 1: the view graph's edges that disagree around triangles go, and only its largest
+  // connected component is kept.
+  ViewGraphCleaningOptions view_graph;
+  // Stage 2: every frame's rotation from the relative rotations of the edges kept. Edges
+  // whose measured rotation is further than max_rotation_error_deg from the averaged ones
+  // are counted as outliers, and frames whose every edge is one are dropped.
+  RotationAveragingOptions rotation_averaging;
+  double max_rotation_error_deg = 5.0;
+  // Stage 3: camera centres and track positions together from the observations' bearings.
+  // Tracks seen by at least min_track_length frames of the model enter, longest first,
+  // while one of their frames has fewer than max_tracks_per_frame of them.
+  GlobalPositioningOptions positioning;
+  int min_track_length = 3;
+  int max_tracks_per_frame = 300;
+  // Stage 4: every track triangulated from the poses, then rounds of global bundle
+  // adjustment with re-triangulation and filtering (the incremental mapper's global
+  // refinement, with its options). Frames that see fewer than min_frame_points points after
+  // the rounds are dropped from the model, and one more round follows.
+  int num_refinement_rounds = 3;
+  int min_frame_points = 15;
+  void Check() const;  // throws InvalidArgument
+};
+
+}  // namespace loopsfm

@@ -1,0 +1,37 @@
+#pragma once
+// What the global mapper (global_mapper.h) did, stage by stage.
+
+#include <vector>
+
+#include "loopsfm/estimators/global_positioning.h"
+#include "loopsfm/estimators/rotation_averaging.h"
+#include "loopsfm/matching/view_graph_cleaning.h"
+
+namespace loopsfm {
+
+struct GlobalMapperReport {
+  // Verified pairs with a relative pose that entered the view graph.
+  int num_view_graph_edges = 0;
+  ViewGraphCleaningReport view_graph;
+  RotationAveragingReport rotations;
+  // Edges left out after rotation averaging (residual above max_rotation_error_deg), and
+  // frames dropped for having no edge left.
+  int num_rotation_outliers = 0;
+  int num_frames_without_edges = 0;
+  // Tracks and observations that entered global positioning.
+  int num_tracks_positioned = 0;
+  GlobalPositioningReport positioning;
+  // Frames dropped after the bundles for seeing too few points.
+  int num_frames_dropped = 0;
+  // Frames of the input, and in the model at the end.
+  int num_frames = 0;
+  int num_registered = 0;
+  // Seconds per stage.
+  double seconds_view_graph = 0.0;
+  double seconds_rotations = 0.0;
+  double seconds_positioning = 0.0;
+  double seconds_triangulation = 0.0;
+  double seconds_bundles = 0.0;
+};
+
+}  // namespace loopsfm
