@@ -496,4 +496,58 @@ void UpdateRelativePose(const Camera& camera1, const std::vector<Eigen::Vector2d
                           /*set_essential=*/true, geometry);
 }
 
+namespace {
+
+// The rotation nearest to H (normalised image coordinates) scaled to determinant 1: a
+// pair's rotation where its baseline is short against the scene's depth.
+std::optional<Eigen::Matrix3d> RotationOfHomography(const Eigen::Matrix3d& H) {
+  const double det = H.determinant();
+  if (!std::isfinite(det) || std::abs(det) < 1e-12) return std::nullopt;
+  const Eigen::JacobiSVD<Eigen::Matrix3d> svd(H / std::cbrt(det),
+                                              Eigen::ComputeFullU | Eigen::ComputeFullV);
+  Eigen::Matrix3d R = svd.matrixU() * svd.matrixV().transpose();
+  if (R.determinant() < 0) return std::nullopt;
+  return R;
+}
+
+}  // namespace
+
+std::optional<Rigid3d> EssentialPoseOfPair(const Camera& camera1,
+                                           const std::vector<Eigen::Vector2d>& keypoints1,
+                                           const Camera& camera2,
+                                           const std::vector<Eigen::Vector2d>& keypoints2,
+                                           const TwoViewVerificationOptions& options,
+                                           const TwoViewGeometry& geometry) {
+  if (!geometry.F.allFinite() || geometry.F.norm() < 1e-12 || geometry.inlier_matches.size() < 5) {
+    return std::nullopt;
+  }
+  std::vector<Eigen::Vector2d> inliers1, inliers2;
+  inliers1.reserve(geometry.inlier_matches.size());
+  inliers2.reserve(geometry.inlier_matches.size());
+  for (const FeatureMatch& m : geometry.inlier_matches) {
+    inliers1.push_back(camera1.CamFromImg(keypoints1.at(m.point2D_idx1)));
+    inliers2.push_back(camera2.CamFromImg(keypoints2.at(m.point2D_idx2)));
+  }
+  const Eigen::Matrix3d K1 = CalibrationMatrix(camera1), K2 = CalibrationMatrix(camera2);
+  const double threshold_normalized =
+      options.max_error / (0.5 * (camera1.MeanFocalLength() + camera2.MeanFocalLength()));
+  Rigid3d pose = PoseFromEssential(K2.transpose() * geometry.F * K1, inliers1, inliers2);
+  // Where the baseline is short, the points in front of both cameras barely tell E's two
+  // rotations apart (they differ by half a turn about the baseline): the one nearer the
+  // homography's rotation is taken.
+  const std::optional<Eigen::Matrix3d> R_h =
+      geometry.H.allFinite() ? RotationOfHomography(K2.inverse() * geometry.H * K1)
+                             : std::nullopt;
+  if (R_h && pose.translation.norm() > 0.0) {
+    const Eigen::Matrix3d R = pose.rotation.toRotationMatrix();
+    const Eigen::Vector3d t = pose.translation.normalized();
+    const Eigen::Matrix3d twisted = (2.0 * t * t.transpose() - Eigen::Matrix3d::Identity()) * R;
+    const auto angle = [&](const Eigen::Matrix3d& A) {
+      return Eigen::AngleAxisd(Eigen::Matrix3d(A * R_h->transpose())).angle();
+    };
+    if (angle(twisted) < angle(R)) pose.rotation = Eigen::Quaterniond(twisted).normalized();
+  }
+  return RefineRelativePose(inliers1, inliers2, pose, threshold_normalized);
+}
+
 }  // namespace loopsfm

@@ -28,6 +28,9 @@
 // Give each pair its own generator (e.g. Random::Derive(PairToPairId(pair))) and the result
 // does not depend on thread count or scheduling. USAC runs single-threaded (isParallel off).
 
+#include <optional>
+#include <vector>
+
 #include "loopsfm/math/random.h"
 #include "loopsfm/scene/camera.h"
 #include "loopsfm/scene/features.h"
@@ -101,5 +104,17 @@ TwoViewVerification VerifyTwoViewGeometry(const Camera& camera1,
 void UpdateRelativePose(const Camera& camera1, const std::vector<Eigen::Vector2d>& keypoints1,
                         const Camera& camera2, const std::vector<Eigen::Vector2d>& keypoints2,
                         const TwoViewVerificationOptions& options, TwoViewGeometry* geometry);
+
+// The relative pose a verified pair's F gives under the cameras' intrinsics (the essential
+// matrix's pose, refined on the inliers' Sampson errors), whatever its configuration. A
+// planar pair's pose from its homography can pick the wrong one of the decomposition's
+// solutions where the baseline is short; its F still holds the rotation. Returns nullopt
+// for a pair without an F.
+std::optional<Rigid3d> EssentialPoseOfPair(const Camera& camera1,
+                                           const std::vector<Eigen::Vector2d>& keypoints1,
+                                           const Camera& camera2,
+                                           const std::vector<Eigen::Vector2d>& keypoints2,
+                                           const TwoViewVerificationOptions& options,
+                                           const TwoViewGeometry& geometry);
 
 }  // namespace loopsfm

@@ -5,6 +5,7 @@
 #include <unordered_map>
 #include <utility>
 
+#include "loopsfm/matching/geometric_verification.h"
 #include "loopsfm/sfm/mapper_state.h"
 #include "loopsfm/util/errors.h"
 #include "loopsfm/util/logging.h"
@@ -14,6 +15,7 @@ namespace loopsfm {
 
 void GlobalMapperOptions::Check() const {
   view_graph.Check();
+  verification.Check();
   rotation_averaging.Check();
   positioning.Check();
   LOOPSFM_REQUIRE_OPTION(max_rotation_error_deg > 0.0,
@@ -25,6 +27,12 @@ void GlobalMapperOptions::Check() const {
   LOOPSFM_REQUIRE_OPTION(max_tracks_per_frame > 0,
                          "global mapper max_tracks_per_frame must be positive, got {}",
                          max_tracks_per_frame);
+  LOOPSFM_REQUIRE_OPTION(loose_error_factor >= 1.0,
+                         "global mapper loose_error_factor must be at least 1, got {}",
+                         loose_error_factor);
+  LOOPSFM_REQUIRE_OPTION(num_loose_rounds >= 0,
+                         "global mapper num_loose_rounds must not be negative, got {}",
+                         num_loose_rounds);
   LOOPSFM_REQUIRE_OPTION(num_refinement_rounds >= 1,
                          "global mapper num_refinement_rounds must be at least 1, got {}",
                          num_refinement_rounds);
@@ -47,13 +55,28 @@ bool HasRelativePose(const TwoViewGeometry& geometry) {
   }
 }
 
-// One edge per verified pair with a relative pose, weighted by its inliers.
-std::vector<RelativeRotation> ViewGraphEdges(const MapperInput& input) {
+// One edge per verified pair with a relative pose, weighted by its inliers. A planar pair's
+// rotation comes from its F, as an uncalibrated pair's (EssentialPoseOfPair).
+std::vector<RelativeRotation> ViewGraphEdges(const MapperInput& input,
+                                             const GlobalMapperOptions& options) {
+  std::unordered_map<image_t, const MapperFrame*> frame_of;
+  for (const MapperFrame& frame : input.frames) frame_of[frame.image_id] = &frame;
+  std::unordered_map<camera_t, const Camera*> camera_of;
+  for (const Camera& camera : input.cameras) camera_of[camera.camera_id] = &camera;
   std::vector<RelativeRotation> edges;
   for (const MapperPair& pair : input.pairs) {
     if (!pair.geometry.IsVerified() || !HasRelativePose(pair.geometry)) continue;
-    edges.push_back({pair.pair.image_id1, pair.pair.image_id2,
-                     pair.geometry.cam2_from_cam1.rotation,
+    Eigen::Quaterniond rotation = pair.geometry.cam2_from_cam1.rotation;
+    const MapperFrame& frame1 = *frame_of.at(pair.pair.image_id1);
+    const MapperFrame& frame2 = *frame_of.at(pair.pair.image_id2);
+    std::optional<Rigid3d> essential;
+    if (pair.geometry.config == TwoViewGeometry::kPlanar) {
+      essential = EssentialPoseOfPair(*camera_of.at(frame1.camera_id), frame1.points2D,
+                                      *camera_of.at(frame2.camera_id), frame2.points2D,
+                                      options.verification, pair.geometry);
+      if (essential) rotation = essential->rotation;
+    }
+    edges.push_back({pair.pair.image_id1, pair.pair.image_id2, rotation,
                      static_cast<double>(pair.geometry.inlier_matches.size())});
   }
   return edges;
@@ -63,7 +86,7 @@ std::vector<RelativeRotation> ViewGraphEdges(const MapperInput& input) {
 Rotations EstimateRotations(const MapperInput& input, const GlobalMapperOptions& options,
                             GlobalMapperReport* report) {
   Timer timer;
-  const std::vector<RelativeRotation> edges = ViewGraphEdges(input);
+  const std::vector<RelativeRotation> edges = ViewGraphEdges(input, options);
   report->num_view_graph_edges = static_cast<int>(edges.size());
   const ViewGraphCleaningResult cleaned = CleanViewGraph(edges, options.view_graph);
   report->view_graph = cleaned.report;
@@ -167,15 +190,16 @@ int DropWeakFrames(const std::vector<image_t>& ordered, int min_frame_points,
   return dropped;
 }
 
-// Stage 4: the model at the positioned poses, its tracks triangulated and refined.
-std::vector<Reconstruction> BuildModel(const MapperInput& input,
-                                       const IncrementalMapperOptions& mapper_options,
-                                       const GlobalMapperOptions& options,
-                                       const std::map<image_t, Rigid3d>& poses,
-                                       GlobalMapperReport* report, MapperReport* mapper_report) {
-  MapperState state(input, mapper_options);
-  Reconstruction& rec = state.reconstruction();
-  std::vector<image_t> ordered;  // capture order
+// Registers the frames of `poses` in `state` at those poses, in capture order, with the
+// cameras' intrinsics of `cameras` where given, sets the gauge, and triangulates every
+// track. Returns the frames registered, in capture order.
+std::vector<image_t> PlaceFrames(const MapperInput& input, const std::map<image_t, Rigid3d>& poses,
+                                 const Reconstruction* cameras, MapperState* state) {
+  Reconstruction& rec = state->reconstruction();
+  if (cameras) {
+    for (const auto& [id, camera] : cameras->Cameras()) rec.GetCamera(id) = camera;
+  }
+  std::vector<image_t> ordered;
   for (const MapperFrame& frame : input.frames) {
     const auto pose = poses.find(frame.image_id);
     if (pose == poses.end()) continue;
@@ -183,12 +207,47 @@ std::vector<Reconstruction> BuildModel(const MapperInput& input,
     rec.RegisterImage(frame.image_id);
     ordered.push_back(frame.image_id);
   }
-  if (ordered.size() < 2) return {};
-  state.SetGauge(ordered[0], ordered[1]);
+  if (ordered.size() < 2) return ordered;
+  state->SetGauge(ordered[0], ordered[1]);
+  state->RetriangulateAll();
+  state->FilterPoints({});
+  return ordered;
+}
+
+std::map<image_t, Rigid3d> RegisteredPoses(const Reconstruction& rec) {
+  std::map<image_t, Rigid3d> poses;
+  for (const image_t id : rec.RegImageIds()) poses[id] = rec.GetImage(id).cam_from_world;
+  return poses;
+}
+
+// Stage 4: the model at the positioned poses, its tracks triangulated and refined. The
+// positions are rough, so the first bundles accept reprojection errors
+// loose_error_factor times the usual bound (a track that does not fit its frames within the
+// bound would be split into several points, and frames held by few points); the model is
+// then triangulated again under the usual bound and refined.
+std::vector<Reconstruction> BuildModel(const MapperInput& input,
+                                       const IncrementalMapperOptions& mapper_options,
+                                       const GlobalMapperOptions& options,
+                                       const std::map<image_t, Rigid3d>& poses,
+                                       GlobalMapperReport* report, MapperReport* mapper_report) {
   Timer timer;
-  state.RetriangulateAll();
-  state.FilterPoints({});
+  IncrementalMapperOptions loose_options = mapper_options;
+  loose_options.max_reproj_error_px *= options.loose_error_factor;
+  MapperState loose(input, loose_options);
+  if (PlaceFrames(input, poses, nullptr, &loose).size() < 2) return {};
   report->seconds_triangulation = timer.ElapsedSeconds();
+  timer.Restart();
+  for (int round = 0; round < options.num_loose_rounds; ++round) {
+    loose.GlobalRefinement(mapper_report);
+  }
+  report->seconds_bundles = timer.ElapsedSeconds();
+
+  timer.Restart();
+  MapperState state(input, mapper_options);
+  const std::vector<image_t> ordered =
+      PlaceFrames(input, RegisteredPoses(loose.reconstruction()), &loose.reconstruction(), &state);
+  Reconstruction& rec = state.reconstruction();
+  report->seconds_triangulation += timer.ElapsedSeconds();
   timer.Restart();
   for (int round = 0; round < options.num_refinement_rounds; ++round) {
     state.GlobalRefinement(mapper_report);
@@ -197,7 +256,7 @@ std::vector<Reconstruction> BuildModel(const MapperInput& input,
   if (report->num_frames_dropped > 0 && rec.NumRegImages() >= 2) {
     state.GlobalRefinement(mapper_report);
   }
-  report->seconds_bundles = timer.ElapsedSeconds();
+  report->seconds_bundles += timer.ElapsedSeconds();
   if (rec.NumRegImages() < 2) return {};
   rec.UpdateReprojectionErrors();
   std::vector<Reconstruction> models;

@@ -3,6 +3,7 @@
 
 #include "loopsfm/estimators/global_positioning.h"
 #include "loopsfm/estimators/rotation_averaging.h"
+#include "loopsfm/matching/geometric_verification.h"
 #include "loopsfm/matching/view_graph_cleaning.h"
 
 namespace loopsfm {
@@ -11,6 +12,9 @@ struct GlobalMapperOptions {
   // Stage 1: the view graph's edges that disagree around triangles go, and only its largest
   // connected component is kept.
   ViewGraphCleaningOptions view_graph;
+  // The pairs' verification settings (its inlier threshold), for the rotations of planar
+  // pairs, which come from their F.
+  TwoViewVerificationOptions verification;
   // Stage 2: every frame's rotation from the relative rotations of the edges kept. Edges
   // whose measured rotation is further than max_rotation_error_deg from the averaged ones
   // are counted as outliers, and frames whose every edge is one are dropped.
@@ -24,9 +28,14 @@ struct GlobalMapperOptions {
   int max_tracks_per_frame = 300;
   // Stage 4: every track triangulated from the poses, then rounds of global bundle
   // adjustment with re-triangulation and filtering (the incremental mapper's global
-  // refinement, with its options). Frames that see fewer than min_frame_points points after
-  // the rounds are dropped from the model, and one more round follows.
-  int num_refinement_rounds = 3;
+  // refinement, with its options): first num_loose_rounds accepting reprojection errors up
+  // to loose_error_factor times the usual bound (the positions are rough), then, triangulated
+  // again under the usual bound, num_refinement_rounds. Frames that see fewer than
+  // min_frame_points points after the rounds are dropped from the model, and one more
+  // round follows.
+  double loose_error_factor = 8.0;
+  int num_loose_rounds = 2;
+  int num_refinement_rounds = 2;
   int min_frame_points = 15;
   void Check() const;  // throws InvalidArgument
 };
