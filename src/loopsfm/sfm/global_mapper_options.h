@@ -25,7 +25,7 @@ struct GlobalMapperOptions {
   // while one of their frames has fewer than max_tracks_per_frame of them.
   GlobalPositioningOptions positioning;
   int min_track_length = 3;
-  int max_tracks_per_frame = 300;
+  int max_tracks_per_frame = 100;
   // Stage 4: every track triangulated from the poses, then rounds of global bundle
   // adjustment with re-triangulation and filtering (the incremental mapper's global
   // refinement, with its options): first num_loose_rounds accepting reprojection errors up
@@ -34,8 +34,8 @@ struct GlobalMapperOptions {
   // min_frame_points points after the rounds are dropped from the model, and one more
   // round follows.
   double loose_error_factor = 8.0;
-  int num_loose_rounds = 2;
-  int num_refinement_rounds = 2;
+  int num_loose_rounds = 1;
+  int num_refinement_rounds = 1;
   int min_frame_points = 15;
   void Check() const;  // throws InvalidArgument
 };
