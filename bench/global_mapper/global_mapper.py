@@ -43,7 +43,7 @@ def reconstruct(args, name, inp, intrinsics, folder, mapper, database=None):
     if database:
         shutil.copy(database, os.path.join(folder, 'database.db'))
     cmd = [args.loopsfm, '--threads', str(args.threads), '-q', 'reconstruct', inp, '-o', folder,
-           '--mapper', mapper, '--export', 'colmap']
+           '--mapper', mapper, '--export', 'colmap,report']
     if mapper == 'incremental':
         cmd += ['--checkpoint-every', '0']
     if intrinsics != '-':
@@ -60,7 +60,9 @@ def evaluate(args, folder, groundtruth):
         return None
     out = subprocess.run([args.loopsfm, 'eval', '--json', model, groundtruth],
                          capture_output=True, text=True)
-    return json.loads(out.stdout) if out.returncode == 0 else None
+    if out.returncode != 0:
+        sys.exit(f'eval of {model} failed ({out.returncode}):\n{out.stderr[-2000:]}')
+    return json.loads(out.stdout)
 
 
 def main():

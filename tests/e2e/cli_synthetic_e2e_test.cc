@@ -322,6 +322,41 @@ TEST_F(CliSyntheticTest, DatabaseNamesVideoFramesByIndex) {
 // matching on the same database verifies such a pair without trying every pair. (With the
 // default of 5 loop partners per frame, the band of loop pairs is thinned: the loop is
 // closed by e.g. (0, 33) and (2, 35), not necessarily by (0, 35) itself.)
+// The global mapper on the same database: every frame, as accurate as the incremental
+// mapper's bounds, and the summary names its stages. The incremental mapper's options are
+// refused with it.
+TEST_F(CliSyntheticTest, GlobalMapperMapsTheLoopWhole) {
+  TempDir tmp;
+  fs::copy_file(run_->out / "database.db", tmp / "database.db");
+  const std::vector<std::string> args = {"reconstruct", (run_->scene / "video.mp4").string(),
+                                         "--intrinsics", (run_->scene / "intrinsics.txt").string(),
+                                         "-o", tmp.path().string(), "--every", "1",
+                                         "--mapper", "global", "--export", "colmap,report"};
+  const CommandResult global = RunLoopsfm(args);
+  ASSERT_EQ(global.exit_code, 0) << global;
+  EXPECT_NE(global.output.find("global positioning"), std::string::npos) << global;
+  EXPECT_NE(global.output.find("time map: positions"), std::string::npos) << global;
+  const Reconstruction model = ReadColmapModel(tmp / "sparse" / "0");
+  const TrajectoryMetrics metrics = EvaluateTrajectory(model, GroundTruth());
+  ASSERT_TRUE(metrics.aligned) << metrics.explanation;
+  EXPECT_GE(metrics.fraction_registered, kMinFractionRegistered);
+  EXPECT_LT(metrics.ate_fraction_of_path, kMaxAteFractionOfPath);
+  EXPECT_LT(metrics.rotation_error_mean_deg, kMaxRotationErrorMeanDeg);
+  std::cout << fmt::format("[ info     ] global mapper: {} / {} registered, ATE {:.4f} % of the "
+                           "path, rotation error mean {:.3f} deg\n",
+                           metrics.num_matched, metrics.num_gt_frames,
+                           100.0 * metrics.ate_fraction_of_path, metrics.rotation_error_mean_deg);
+  std::ifstream report(tmp / "report.html");
+  const std::string html((std::istreambuf_iterator<char>(report)), std::istreambuf_iterator<char>());
+  EXPECT_NE(html.find("\"mapper\":\"global\""), std::string::npos);
+
+  std::vector<std::string> with_loop_closing = args;
+  with_loop_closing.insert(with_loop_closing.end(), {"--loop-closing", "split"});
+  const CommandResult refused = RunLoopsfm(with_loop_closing);
+  EXPECT_EQ(refused.exit_code, 2) << refused;
+  EXPECT_NE(refused.output.find("--loop-closing"), std::string::npos) << refused;
+}
+
 TEST_F(CliSyntheticTest, SequentialPairsLeaveTheLoopOpenVocabTreeClosesIt) {
   TempDir tmp;
   const fs::path db = tmp / "database.db";

@@ -5,6 +5,7 @@
 #include <unordered_map>
 #include <utility>
 
+#include "loopsfm/estimators/bearing_rays.h"
 #include "loopsfm/matching/geometric_verification.h"
 #include "loopsfm/sfm/mapper_state.h"
 #include "loopsfm/util/errors.h"
@@ -55,38 +56,59 @@ bool HasRelativePose(const TwoViewGeometry& geometry) {
   }
 }
 
-// One edge per verified pair with a relative pose, weighted by its inliers. A planar pair's
-// rotation comes from its F, as an uncalibrated pair's (EssentialPoseOfPair).
-std::vector<RelativeRotation> ViewGraphEdges(const MapperInput& input,
-                                             const GlobalMapperOptions& options) {
+// The relative pose of a verified pair, as the global mapper uses it.
+struct PairPose {
+  image_t image_id1 = kInvalidImageId;
+  image_t image_id2 = kInvalidImageId;
+  Rigid3d cam2_from_cam1;
+  // The translation's direction is known (zero for a panoramic pair).
+  bool has_translation = false;
+  double weight = 0.0;  // inliers
+};
+
+// Every verified pair with a relative pose. A planar pair's pose comes from its F, as an
+// uncalibrated pair's (EssentialPoseOfPair): the homography's decomposition picks the wrong
+// solution where the baseline is short.
+std::vector<PairPose> PairPoses(const MapperInput& input, const GlobalMapperOptions& options) {
   std::unordered_map<image_t, const MapperFrame*> frame_of;
   for (const MapperFrame& frame : input.frames) frame_of[frame.image_id] = &frame;
   std::unordered_map<camera_t, const Camera*> camera_of;
   for (const Camera& camera : input.cameras) camera_of[camera.camera_id] = &camera;
-  std::vector<RelativeRotation> edges;
+  std::vector<PairPose> poses;
   for (const MapperPair& pair : input.pairs) {
-    if (!pair.geometry.IsVerified() || !HasRelativePose(pair.geometry)) continue;
-    Eigen::Quaterniond rotation = pair.geometry.cam2_from_cam1.rotation;
-    const MapperFrame& frame1 = *frame_of.at(pair.pair.image_id1);
-    const MapperFrame& frame2 = *frame_of.at(pair.pair.image_id2);
-    std::optional<Rigid3d> essential;
-    if (pair.geometry.config == TwoViewGeometry::kPlanar) {
-      essential = EssentialPoseOfPair(*camera_of.at(frame1.camera_id), frame1.points2D,
-                                      *camera_of.at(frame2.camera_id), frame2.points2D,
-                                      options.verification, pair.geometry);
-      if (essential) rotation = essential->rotation;
+    const TwoViewGeometry& geometry = pair.geometry;
+    if (!geometry.IsVerified() || !HasRelativePose(geometry)) continue;
+    PairPose pose{pair.pair.image_id1, pair.pair.image_id2, geometry.cam2_from_cam1,
+                  geometry.config != TwoViewGeometry::kPanoramic,
+                  static_cast<double>(geometry.inlier_matches.size())};
+    if (geometry.config == TwoViewGeometry::kPlanar) {
+      const MapperFrame& frame1 = *frame_of.at(pair.pair.image_id1);
+      const MapperFrame& frame2 = *frame_of.at(pair.pair.image_id2);
+      const std::optional<Rigid3d> essential = EssentialPoseOfPair(
+          *camera_of.at(frame1.camera_id), frame1.points2D, *camera_of.at(frame2.camera_id),
+          frame2.points2D, options.verification, geometry);
+      if (essential) pose.cam2_from_cam1 = *essential;
     }
-    edges.push_back({pair.pair.image_id1, pair.pair.image_id2, rotation,
-                     static_cast<double>(pair.geometry.inlier_matches.size())});
+    pose.has_translation = pose.has_translation && pose.cam2_from_cam1.translation.norm() > 0.0;
+    poses.push_back(pose);
   }
-  return edges;
+  return poses;
+}
+
+// The direction from camera 1's centre to camera 2's in the world: cam2_from_cam1 = (R, t)
+// puts camera 1's centre at t in camera 2, so c1 - c2 = R_2^T t.
+Eigen::Vector3d CentreDirection(const PairPose& pose, const Eigen::Quaterniond& cam2_from_world) {
+  return -(cam2_from_world.conjugate() * pose.cam2_from_cam1.translation).normalized();
 }
 
 // Stages 1 and 2: the view graph cleaned, and the rotations of its frames.
-Rotations EstimateRotations(const MapperInput& input, const GlobalMapperOptions& options,
-                            GlobalMapperReport* report) {
+Rotations EstimateRotations(const std::vector<PairPose>& pair_poses,
+                            const GlobalMapperOptions& options, GlobalMapperReport* report) {
   Timer timer;
-  const std::vector<RelativeRotation> edges = ViewGraphEdges(input, options);
+  std::vector<RelativeRotation> edges;
+  for (const PairPose& pose : pair_poses) {
+    edges.push_back({pose.image_id1, pose.image_id2, pose.cam2_from_cam1.rotation, pose.weight});
+  }
   report->num_view_graph_edges = static_cast<int>(edges.size());
   const ViewGraphCleaningResult cleaned = CleanViewGraph(edges, options.view_graph);
   report->view_graph = cleaned.report;
@@ -128,9 +150,51 @@ Rotations EstimateRotations(const MapperInput& input, const GlobalMapperOptions&
   return rotations;
 }
 
+// A start for global positioning along the video: frames in capture order one unit apart,
+// each step along the direction its pair's relative pose gives (the step before's where the
+// two frames have no pair with a translation), and every point where its rays from those
+// centres meet.
+void ChainedStart(const MapperInput& input, const Rotations& rotations,
+                  const std::vector<PairPose>& pair_poses, GlobalPositioningInput* positioning) {
+  std::map<std::pair<image_t, image_t>, const PairPose*> pose_of;
+  for (const PairPose& pose : pair_poses) {
+    if (pose.has_translation) pose_of[{pose.image_id1, pose.image_id2}] = &pose;
+  }
+  Eigen::Vector3d centre = Eigen::Vector3d::Zero();
+  Eigen::Vector3d step = Eigen::Vector3d::Zero();
+  image_t previous = kInvalidImageId;
+  for (const MapperFrame& frame : input.frames) {
+    const auto rotation = rotations.find(frame.image_id);
+    if (rotation == rotations.end()) continue;
+    if (previous != kInvalidImageId) {
+      if (const auto forward = pose_of.find({previous, frame.image_id}); forward != pose_of.end()) {
+        step = CentreDirection(*forward->second, rotation->second);
+      } else if (const auto backward = pose_of.find({frame.image_id, previous});
+                 backward != pose_of.end()) {
+        step = -CentreDirection(*backward->second, rotations.at(previous));
+      }
+      centre += step.squaredNorm() > 0.0 ? step : Eigen::Vector3d::UnitX();
+    }
+    positioning->initial_centres[frame.image_id] = centre;
+    previous = frame.image_id;
+  }
+  std::map<point3D_t, std::vector<BearingRay>> rays;
+  for (const BearingObservation& obs : positioning->observations) {
+    const Eigen::Vector3d direction =
+        (rotations.at(obs.image_id).conjugate() * obs.bearing_in_cam).normalized();
+    rays[obs.point_id].push_back({positioning->initial_centres.at(obs.image_id), direction});
+  }
+  for (const auto& [id, point_rays] : rays) {
+    if (const std::optional<Eigen::Vector3d> point = IntersectRays(point_rays)) {
+      positioning->initial_points[id] = *point;
+    }
+  }
+}
+
 // Stage 3's input: the bearings of the tracks chosen (see GlobalMapperOptions), each track's
 // index standing for its point.
 GlobalPositioningInput PositioningInput(const MapperInput& input, const Rotations& rotations,
+                                        const std::vector<PairPose>& pair_poses,
                                         const GlobalMapperOptions& options, int* num_tracks) {
   std::unordered_map<image_t, const MapperFrame*> frame_of;
   for (const MapperFrame& frame : input.frames) frame_of[frame.image_id] = &frame;
@@ -164,6 +228,18 @@ GlobalPositioningInput PositioningInput(const MapperInput& input, const Rotation
           {el.image_id, static_cast<point3D_t>(t), Eigen::Vector3d(xy.x(), xy.y(), 1.0)});
     }
   }
+  if (options.pair_directions) {
+    for (const PairPose& pose : pair_poses) {
+      const auto rotation2 = rotations.find(pose.image_id2);
+      if (!pose.has_translation || rotations.count(pose.image_id1) == 0 ||
+          rotation2 == rotations.end()) {
+        continue;
+      }
+      positioning.camera_directions.push_back(
+          {pose.image_id1, pose.image_id2, CentreDirection(pose, rotation2->second)});
+    }
+  }
+  if (options.chained_start) ChainedStart(input, rotations, pair_poses, &positioning);
   return positioning;
 }
 
@@ -280,7 +356,8 @@ std::vector<Reconstruction> RunGlobalMapper(const MapperInput& input,
   *report = {};
   report->num_frames = static_cast<int>(input.frames.size());
 
-  const Rotations rotations = EstimateRotations(input, options, report);
+  const std::vector<PairPose> pair_poses = PairPoses(input, options);
+  const Rotations rotations = EstimateRotations(pair_poses, options, report);
   if (rotations.size() < 2) {
     spdlog::warn("global mapper: fewer than two frames are linked by verified pairs that agree; "
                  "no model");
@@ -289,7 +366,7 @@ std::vector<Reconstruction> RunGlobalMapper(const MapperInput& input,
 
   Timer timer;
   GlobalPositioningInput positioning_input =
-      PositioningInput(input, rotations, options, &report->num_tracks_positioned);
+      PositioningInput(input, rotations, pair_poses, options, &report->num_tracks_positioned);
   GlobalPositioningOptions positioning_options = options.positioning;
   positioning_options.num_threads = mapper_options.num_threads;
   positioning_options.seed = mapper_options.seed;

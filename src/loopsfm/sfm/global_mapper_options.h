@@ -26,6 +26,13 @@ struct GlobalMapperOptions {
   GlobalPositioningOptions positioning;
   int min_track_length = 3;
   int max_tracks_per_frame = 100;
+  // Also a term per verified pair with an essential matrix, the direction between its two
+  // camera centres as the pair's relative pose gives it (GlobalPositioningOptions::
+  // camera_direction_weight weighs it against one point observation).
+  bool pair_directions = true;
+  // Start from the video's order instead of random positions: consecutive frames one unit
+  // apart along their pair's direction, points where their rays from there meet.
+  bool chained_start = true;
   // Stage 4: every track triangulated from the poses, then rounds of global bundle
   // adjustment with re-triangulation and filtering (the incremental mapper's global
   // refinement, with its options): first num_loose_rounds accepting reprojection errors up

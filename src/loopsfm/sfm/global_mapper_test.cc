@@ -1,0 +1,107 @@
+#include "loopsfm/sfm/global_mapper.h"
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+
+#include "loopsfm/scene/random_rotations.h"
+#include "loopsfm/sfm/sfm_test_problem.h"
+#include "loopsfm/util/errors.h"
+
+namespace loopsfm {
+namespace {
+
+using testing::MakeMapperProblem;
+using testing::MapperProblem;
+using testing::MapperProblemOptions;
+
+IncrementalMapperOptions OneThread() {
+  IncrementalMapperOptions options;
+  options.num_threads = 1;
+  return options;
+}
+
+// A walk out and back along a wall (a loop: the walk back sees what the walk out saw), its
+// pairs' rotations measured with `noise_deg` of noise, and every `outlier_every`-th pair's
+// rotation replaced by one far from the truth (0: none).
+MapperProblem NoisyWalkBack(double noise_deg, int outlier_every) {
+  MapperProblemOptions options;
+  options.num_frames = 50;
+  options.walk_back = true;
+  MapperProblem p = MakeMapperProblem(options);
+  Random random(11);
+  for (size_t k = 0; k < p.input.pairs.size(); ++k) {
+    Eigen::Quaterniond& rotation = p.input.pairs[k].geometry.cam2_from_cam1.rotation;
+    rotation = outlier_every > 0 && k % outlier_every == 0
+                   ? testing::OutlierRotation(rotation, random)
+                   : (testing::Noise(random, noise_deg) * rotation).normalized();
+  }
+  return p;
+}
+
+TEST(GlobalMapper, LoopWalkIsMappedWholeDespiteOutlierPairs) {
+  const MapperProblem p = NoisyWalkBack(0.3, 15);
+  GlobalMapperReport report;
+  MapperReport mapper_report;
+  const std::vector<Reconstruction> models =
+      RunGlobalMapper(p.input, OneThread(), GlobalMapperOptions(), &report, &mapper_report);
+  ASSERT_EQ(models.size(), 1u);
+  const testing::PoseError error = testing::ComparePoses(models[0], p);
+  EXPECT_EQ(error.num_registered, 50);
+  // ComparePoses gives the error as a fraction of the distance between the first and the
+  // last frame, which the walk back brings close together: in metres, against a walk of
+  // 2 x 7.5 m.
+  const double ends = (p.cam_from_world.front().Inverse().translation -
+                       p.cam_from_world.back().Inverse().translation).norm();
+  EXPECT_LT(error.max_centre_error * ends, 0.02);
+  EXPECT_LT(error.max_rotation_deg, 0.2);
+  // Every planted outlier pair is dropped around triangles or left disagreeing with the
+  // averaged rotations.
+  const int outliers = static_cast<int>((p.input.pairs.size() + 14) / 15);
+  EXPECT_EQ(report.num_view_graph_edges, static_cast<int>(p.input.pairs.size()));
+  EXPECT_GE(report.view_graph.num_dropped_by_triangles + report.num_rotation_outliers, outliers);
+  EXPECT_EQ(report.num_registered, 50);
+  EXPECT_GT(report.positioning.num_observations, 0);
+  EXPECT_GE(mapper_report.num_global_ba, 2);
+}
+
+TEST(GlobalMapper, OnlyTheLargestPartOfAViewGraphThatFallsApartIsMapped) {
+  MapperProblemOptions options;
+  options.num_frames = 40;
+  MapperProblem p = MakeMapperProblem(options);
+  // No pair across frame 25: two parts, of 25 and 15 frames.
+  std::erase_if(p.input.pairs, [&](const MapperPair& pair) {
+    return (pair.pair.image_id1 <= 25) != (pair.pair.image_id2 <= 25);
+  });
+  testing::RebuildTracks(&p.input);
+  GlobalMapperReport report;
+  const std::vector<Reconstruction> models =
+      RunGlobalMapper(p.input, OneThread(), GlobalMapperOptions(), &report, nullptr);
+  ASSERT_EQ(models.size(), 1u);
+  EXPECT_EQ(models[0].NumRegImages(), 25u);
+  EXPECT_GT(report.view_graph.num_dropped_outside_component, 0);
+  const testing::PoseError error = testing::ComparePoses(models[0], p);
+  EXPECT_LT(error.max_centre_error, 0.005);
+}
+
+TEST(GlobalMapper, OptionsAreChecked) {
+  GlobalMapperOptions options;
+  options.max_rotation_error_deg = 0.0;
+  EXPECT_THROW(options.Check(), InvalidArgument);
+  options = {};
+  options.min_track_length = 1;
+  EXPECT_THROW(options.Check(), InvalidArgument);
+  options = {};
+  options.loose_error_factor = 0.5;
+  EXPECT_THROW(options.Check(), InvalidArgument);
+  options = {};
+  options.num_refinement_rounds = 0;
+  EXPECT_THROW(options.Check(), InvalidArgument);
+  options = {};
+  options.positioning.max_num_iterations = 0;
+  EXPECT_THROW(options.Check(), InvalidArgument);
+  EXPECT_NO_THROW(GlobalMapperOptions().Check());
+}
+
+}  // namespace
+}  // namespace loopsfm
