@@ -146,10 +146,8 @@ BundleAdjustmentOptions BundleAdjustmentOptions::Global() {
   BundleAdjustmentOptions options;
   options.max_num_iterations = 100;
   // Soft L1 from 0.7 px instead of 1 px (SIFT's keypoints are good to about half a pixel):
-  // observations a pixel or two off weigh less in the model every output comes from.
-  // Measured with intrinsics, same databases: ATE -12 % templeRing, -4 % block, -5 %
-  // cylinder, -1 % kitti07_160, -4 % fox (medians of 5 seeds); without intrinsics the focal
-  // lengths move by under 0.1 %. 0.5 px was worse than 0.7 on fox, 2 px worse than 1.
+  // observations a pixel or two off weigh less in the model every output comes from
+  // (docs/mapper_options.md).
   options.loss_function_scale = 0.7;
   options.settle_tolerance = 1e-5;
   // loopsfm's models are sequences: a frame shares points with the frames near it on the
