@@ -31,10 +31,6 @@ void ReconstructOptions::Check() const {
   output.Check();
 }
 
-std::string MapperKindName(MapperKind kind) {
-  return kind == MapperKind::kGlobal ? "global" : "incremental";
-}
-
 MapperInput LoadMapperInput(const Database& database, TrackBuildReport* tracks_report) {
   MapperInput input;
   input.cameras = database.ReadCameras();

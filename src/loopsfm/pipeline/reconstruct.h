@@ -24,8 +24,6 @@
 namespace loopsfm {
 
 enum class MapperKind { kIncremental, kGlobal };
-// "incremental" or "global".
-std::string MapperKindName(MapperKind kind);
 
 struct ReconstructOptions {
   ExtractOptions extract;
