@@ -139,23 +139,26 @@ std::string IncrementalMapperSummary(const MapperReport& m) {
 
 std::string GlobalMapperSummary(const GlobalMapperReport& g, const MapperReport& m) {
   std::string out;
-  out += fmt::format("{:<28}{} edges, {} dropped around triangles, {} outside the largest "
-                     "component ({} nodes)\n",
+  out += fmt::format("{:<28}{} edges, {} dropped around triangles ({} nodes); {} connected "
+                     "component{}, {} mapped, {} frames in the others\n",
                      "  view graph", g.num_view_graph_edges, g.view_graph.num_dropped_by_triangles,
-                     g.view_graph.num_dropped_outside_component, g.view_graph.num_nodes);
-  out += fmt::format("{:<28}{} frames, {} L1 and {} robust iterations, {} edges off by more "
+                     g.view_graph.num_nodes, g.num_components, g.num_components == 1 ? "" : "s",
+                     g.num_components_mapped, g.num_frames_in_other_components);
+  const std::string largest = g.num_components_mapped > 1 ? " (the largest component)" : "";
+  out += fmt::format("{:<28}{} frames, {} L1 and {} robust iterations{}; {} edges off by more "
                      "than their bound, {} frames left without an edge\n",
                      "  rotation averaging", g.rotations.num_nodes, g.rotations.num_l1_iterations,
-                     g.rotations.num_iterations, g.num_rotation_outliers,
+                     g.rotations.num_iterations, largest, g.num_rotation_outliers,
                      g.num_frames_without_edges);
-  out += fmt::format("{:<28}{} frames, {} tracks, {} observations, {} iterations{}\n",
-                     "  global positioning", g.positioning.num_cameras, g.num_tracks_positioned,
-                     g.positioning.num_observations, g.positioning.num_iterations,
+  out += fmt::format("{:<28}{} frames, {} points, {} observations, {} iterations{}{}\n",
+                     "  global positioning", g.positioning.num_cameras, g.positioning.num_points,
+                     g.positioning.num_observations, g.positioning.num_iterations, largest,
                      g.positioning.success ? "" : " (failed: " + g.positioning.termination + ")");
-  out += fmt::format("{:<28}{} global BA {:.1f} s, triangulation {:.1f} s; {} of {} frames in the "
-                     "model, {} dropped for seeing too few points\n",
+  out += fmt::format("{:<28}{} global BA {:.1f} s, triangulation {:.1f} s; {} of {} frames in "
+                     "{} model{}, {} dropped for seeing too few points\n",
                      "  structure", m.num_global_ba, m.seconds_global_ba, g.seconds_triangulation,
-                     g.num_registered, g.num_frames, g.num_frames_dropped);
+                     g.num_registered, g.num_frames, m.num_models, m.num_models == 1 ? "" : "s",
+                     g.num_frames_dropped);
   return out;
 }
 

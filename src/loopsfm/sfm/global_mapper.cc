@@ -2,11 +2,13 @@
 
 #include <algorithm>
 #include <map>
+#include <optional>
 #include <unordered_map>
 #include <utility>
 
 #include "loopsfm/estimators/bearing_rays.h"
 #include "loopsfm/matching/geometric_verification.h"
+#include "loopsfm/math/graph.h"
 #include "loopsfm/sfm/mapper_state.h"
 #include "loopsfm/util/errors.h"
 #include "loopsfm/util/logging.h"
@@ -46,6 +48,21 @@ namespace {
 
 using Rotations = std::map<image_t, Eigen::Quaterniond>;
 
+// The input's frames and cameras by id.
+class FrameLookup {
+ public:
+  explicit FrameLookup(const MapperInput& input) {
+    for (const MapperFrame& frame : input.frames) frames_[frame.image_id] = &frame;
+    for (const Camera& camera : input.cameras) cameras_[camera.camera_id] = &camera;
+  }
+  const MapperFrame& Frame(image_t id) const { return *frames_.at(id); }
+  const Camera& CameraOf(image_t id) const { return *cameras_.at(Frame(id).camera_id); }
+
+ private:
+  std::unordered_map<image_t, const MapperFrame*> frames_;
+  std::unordered_map<camera_t, const Camera*> cameras_;
+};
+
 bool HasRelativePose(const TwoViewGeometry& geometry) {
   switch (geometry.config) {
     case TwoViewGeometry::kCalibrated:
@@ -69,11 +86,8 @@ struct PairPose {
 // Every verified pair with a relative pose. A planar pair's pose comes from its F, as an
 // uncalibrated pair's (EssentialPoseOfPair): the homography's decomposition picks the wrong
 // solution where the baseline is short.
-std::vector<PairPose> PairPoses(const MapperInput& input, const GlobalMapperOptions& options) {
-  std::unordered_map<image_t, const MapperFrame*> frame_of;
-  for (const MapperFrame& frame : input.frames) frame_of[frame.image_id] = &frame;
-  std::unordered_map<camera_t, const Camera*> camera_of;
-  for (const Camera& camera : input.cameras) camera_of[camera.camera_id] = &camera;
+std::vector<PairPose> PairPoses(const MapperInput& input, const FrameLookup& lookup,
+                                const GlobalMapperOptions& options) {
   std::vector<PairPose> poses;
   for (const MapperPair& pair : input.pairs) {
     const TwoViewGeometry& geometry = pair.geometry;
@@ -82,11 +96,10 @@ std::vector<PairPose> PairPoses(const MapperInput& input, const GlobalMapperOpti
                   geometry.config != TwoViewGeometry::kPanoramic,
                   static_cast<double>(geometry.inlier_matches.size())};
     if (geometry.config == TwoViewGeometry::kPlanar) {
-      const MapperFrame& frame1 = *frame_of.at(pair.pair.image_id1);
-      const MapperFrame& frame2 = *frame_of.at(pair.pair.image_id2);
+      const image_t id1 = pair.pair.image_id1, id2 = pair.pair.image_id2;
       const std::optional<Rigid3d> essential = EssentialPoseOfPair(
-          *camera_of.at(frame1.camera_id), frame1.points2D, *camera_of.at(frame2.camera_id),
-          frame2.points2D, options.verification, geometry);
+          lookup.CameraOf(id1), lookup.Frame(id1).points2D, lookup.CameraOf(id2),
+          lookup.Frame(id2).points2D, options.verification, geometry);
       if (essential) pose.cam2_from_cam1 = *essential;
     }
     pose.has_translation = pose.has_translation && pose.cam2_from_cam1.translation.norm() > 0.0;
@@ -101,9 +114,11 @@ Eigen::Vector3d CentreDirection(const PairPose& pose, const Eigen::Quaterniond& 
   return -(cam2_from_world.conjugate() * pose.cam2_from_cam1.translation).normalized();
 }
 
-// Stages 1 and 2: the view graph cleaned, and the rotations of its frames.
-Rotations EstimateRotations(const std::vector<PairPose>& pair_poses,
-                            const GlobalMapperOptions& options, GlobalMapperReport* report) {
+// Stage 1: the edges of the view graph that cleaning keeps, one list per connected component
+// of at least min_model_size frames, largest first, at most max_num_models of them.
+std::vector<std::vector<RelativeRotation>> CleanedComponents(
+    const std::vector<PairPose>& pair_poses, const GlobalMapperOptions& options,
+    const IncrementalMapperOptions& mapper_options, GlobalMapperReport* report) {
   Timer timer;
   std::vector<RelativeRotation> edges;
   for (const PairPose& pose : pair_poses) {
@@ -112,41 +127,82 @@ Rotations EstimateRotations(const std::vector<PairPose>& pair_poses,
   report->num_view_graph_edges = static_cast<int>(edges.size());
   const ViewGraphCleaningResult cleaned = CleanViewGraph(edges, options.view_graph);
   report->view_graph = cleaned.report;
-  std::vector<RelativeRotation> kept;
-  for (const int e : cleaned.kept_edges) kept.push_back(edges[e]);
-  report->seconds_view_graph = timer.ElapsedSeconds();
 
-  timer.Restart();
-  const RotationAveragingResult averaged = AverageRotations(kept, options.rotation_averaging);
-  report->rotations = averaged.report;
-  report->rotations.edge_residual_deg.clear();  // per edge: not for the report
+  std::map<image_t, int> node_of;
+  for (const int e : cleaned.kept_edges) {
+    node_of.emplace(edges[e].node1, 0);
+    node_of.emplace(edges[e].node2, 0);
+  }
+  int num_nodes = 0;
+  for (auto& [id, node] : node_of) node = num_nodes++;
+  std::vector<std::pair<int, int>> links;
+  for (const int e : cleaned.kept_edges) {
+    links.push_back({node_of.at(edges[e].node1), node_of.at(edges[e].node2)});
+  }
+  const GraphComponents components = ConnectedComponents(num_nodes, links);  // largest first
+  std::vector<std::vector<RelativeRotation>> parts(components.NumComponents());
+  for (size_t k = 0; k < links.size(); ++k) {
+    parts[components.label[links[k].first]].push_back(edges[cleaned.kept_edges[k]]);
+  }
+  std::vector<std::vector<RelativeRotation>> mapped;
+  for (int c = 0; c < components.NumComponents(); ++c) {
+    if (components.sizes[c] >= mapper_options.min_model_size &&
+        static_cast<int>(mapped.size()) < mapper_options.max_num_models) {
+      mapped.push_back(std::move(parts[c]));
+    } else {
+      report->num_frames_in_other_components += components.sizes[c];
+    }
+  }
+  report->num_components = components.NumComponents();
+  report->num_components_mapped = static_cast<int>(mapped.size());
+  report->seconds_view_graph = timer.ElapsedSeconds();
+  spdlog::info("global mapper: view graph {} edges, {} dropped around triangles; {} connected "
+               "component{}, {} mapped ({} frames in the others)",
+               edges.size(), cleaned.report.num_dropped_by_triangles, report->num_components,
+               report->num_components == 1 ? "" : "s", report->num_components_mapped,
+               report->num_frames_in_other_components);
+  return mapped;
+}
+
+// Stage 2: the rotations of the frames of one component. The report keeps the rotation
+// averaging report of the first (largest) component only.
+Rotations AverageComponent(const std::vector<RelativeRotation>& edges,
+                           const GlobalMapperOptions& options, bool first,
+                           GlobalMapperReport* report) {
+  Timer timer;
+  const RotationAveragingResult averaged = AverageRotations(edges, options.rotation_averaging);
+  if (first) {
+    report->rotations = averaged.report;
+    report->rotations.edge_residual_deg.clear();  // per edge: not for the report
+  }
   std::unordered_map<image_t, int> good_edges;
-  for (size_t e = 0; e < kept.size(); ++e) {
+  int num_outliers = 0;
+  for (size_t e = 0; e < edges.size(); ++e) {
     const double residual = averaged.report.edge_residual_deg[e];
     if (residual < 0.0) continue;
     if (residual > options.max_rotation_error_deg) {
-      ++report->num_rotation_outliers;
+      ++num_outliers;
       continue;
     }
-    ++good_edges[kept[e].node1];
-    ++good_edges[kept[e].node2];
+    ++good_edges[edges[e].node1];
+    ++good_edges[edges[e].node2];
   }
   Rotations rotations;
+  int num_without_edges = 0;
   for (const auto& [id, rotation] : averaged.cam_from_world) {
     if (good_edges.count(id) > 0) {
       rotations[id] = rotation;
     } else {
-      ++report->num_frames_without_edges;
+      ++num_without_edges;
     }
   }
-  report->seconds_rotations = timer.ElapsedSeconds();
-  spdlog::info("global mapper: view graph {} edges, {} dropped around triangles, {} outside the "
-               "largest component; rotations of {} frames, {} edges disagree by more than "
-               "{:.0f} deg, {:.1f} s",
-               edges.size(), cleaned.report.num_dropped_by_triangles,
-               cleaned.report.num_dropped_outside_component, rotations.size(),
-               report->num_rotation_outliers, options.max_rotation_error_deg,
-               report->seconds_view_graph + report->seconds_rotations);
+  report->num_rotation_outliers += num_outliers;
+  report->num_frames_without_edges += num_without_edges;
+  const double seconds = timer.ElapsedSeconds();
+  report->seconds_rotations += seconds;
+  spdlog::info("global mapper: rotations of {} frames, {} edges disagree by more than {:.0f} deg, "
+               "{:.1f} s",
+               rotations.size(), num_outliers, options.max_rotation_error_deg, seconds);
   return rotations;
 }
 
@@ -193,13 +249,10 @@ void ChainedStart(const MapperInput& input, const Rotations& rotations,
 
 // Stage 3's input: the bearings of the tracks chosen (see GlobalMapperOptions), each track's
 // index standing for its point.
-GlobalPositioningInput PositioningInput(const MapperInput& input, const Rotations& rotations,
+GlobalPositioningInput PositioningInput(const MapperInput& input, const FrameLookup& lookup,
+                                        const Rotations& rotations,
                                         const std::vector<PairPose>& pair_poses,
                                         const GlobalMapperOptions& options, int* num_tracks) {
-  std::unordered_map<image_t, const MapperFrame*> frame_of;
-  for (const MapperFrame& frame : input.frames) frame_of[frame.image_id] = &frame;
-  std::unordered_map<camera_t, const Camera*> camera_of;
-  for (const Camera& camera : input.cameras) camera_of[camera.camera_id] = &camera;
   std::vector<std::pair<int, size_t>> candidates;  // (-frames in the model, track)
   for (size_t t = 0; t < input.tracks.size(); ++t) {
     int length = 0;
@@ -221,9 +274,9 @@ GlobalPositioningInput PositioningInput(const MapperInput& input, const Rotation
     for (const TrackElement& el : elements) {
       if (rotations.count(el.image_id) == 0) continue;
       ++taken[el.image_id];
-      const MapperFrame& frame = *frame_of.at(el.image_id);
       const Eigen::Vector2d xy =
-          camera_of.at(frame.camera_id)->CamFromImg(frame.points2D.at(el.point2D_idx));
+          lookup.CameraOf(el.image_id)
+              .CamFromImg(lookup.Frame(el.image_id).points2D.at(el.point2D_idx));
       positioning.observations.push_back(
           {el.image_id, static_cast<point3D_t>(t), Eigen::Vector3d(xy.x(), xy.y(), 1.0)});
     }
@@ -301,22 +354,23 @@ std::map<image_t, Rigid3d> RegisteredPoses(const Reconstruction& rec) {
 // loose_error_factor times the usual bound (a track that does not fit its frames within the
 // bound would be split into several points, and frames held by few points); the model is
 // then triangulated again under the usual bound and refined.
-std::vector<Reconstruction> BuildModel(const MapperInput& input,
-                                       const IncrementalMapperOptions& mapper_options,
-                                       const GlobalMapperOptions& options,
-                                       const std::map<image_t, Rigid3d>& poses,
-                                       GlobalMapperReport* report, MapperReport* mapper_report) {
+std::optional<Reconstruction> BuildModel(const MapperInput& input,
+                                         const IncrementalMapperOptions& mapper_options,
+                                         const GlobalMapperOptions& options,
+                                         const std::map<image_t, Rigid3d>& poses,
+                                         GlobalMapperReport* report,
+                                         MapperReport* mapper_report) {
   Timer timer;
   IncrementalMapperOptions loose_options = mapper_options;
   loose_options.max_reproj_error_px *= options.loose_error_factor;
   MapperState loose(input, loose_options);
-  if (PlaceFrames(input, poses, nullptr, &loose).size() < 2) return {};
-  report->seconds_triangulation = timer.ElapsedSeconds();
+  if (PlaceFrames(input, poses, nullptr, &loose).size() < 2) return std::nullopt;
+  report->seconds_triangulation += timer.ElapsedSeconds();
   timer.Restart();
   for (int round = 0; round < options.num_loose_rounds; ++round) {
     loose.GlobalRefinement(mapper_report);
   }
-  report->seconds_bundles = timer.ElapsedSeconds();
+  report->seconds_bundles += timer.ElapsedSeconds();
 
   timer.Restart();
   MapperState state(input, mapper_options);
@@ -328,16 +382,52 @@ std::vector<Reconstruction> BuildModel(const MapperInput& input,
   for (int round = 0; round < options.num_refinement_rounds; ++round) {
     state.GlobalRefinement(mapper_report);
   }
-  report->num_frames_dropped = DropWeakFrames(ordered, options.min_frame_points, &state);
-  if (report->num_frames_dropped > 0 && rec.NumRegImages() >= 2) {
+  const int dropped = DropWeakFrames(ordered, options.min_frame_points, &state);
+  report->num_frames_dropped += dropped;
+  if (dropped > 0 && rec.NumRegImages() >= 2) {
     state.GlobalRefinement(mapper_report);
   }
   report->seconds_bundles += timer.ElapsedSeconds();
-  if (rec.NumRegImages() < 2) return {};
+  if (rec.NumRegImages() < 2) return std::nullopt;
   rec.UpdateReprojectionErrors();
-  std::vector<Reconstruction> models;
-  models.push_back(std::move(rec));
-  return models;
+  return std::move(rec);
+}
+
+// Stages 3 and 4 for one component with its frames' rotations: global positioning, then the
+// model. The report keeps the positioning report of the first (largest) component only.
+std::optional<Reconstruction> MapComponent(const MapperInput& input, const FrameLookup& lookup,
+                                           const IncrementalMapperOptions& mapper_options,
+                                           const GlobalMapperOptions& options,
+                                           const std::vector<PairPose>& pair_poses,
+                                           const Rotations& rotations, bool first,
+                                           GlobalMapperReport* report,
+                                           MapperReport* mapper_report) {
+  Timer timer;
+  int num_tracks = 0;
+  const GlobalPositioningInput positioning_input =
+      PositioningInput(input, lookup, rotations, pair_poses, options, &num_tracks);
+  report->num_tracks_positioned += num_tracks;
+  GlobalPositioningOptions positioning_options = options.positioning;
+  positioning_options.num_threads = mapper_options.num_threads;
+  positioning_options.seed = mapper_options.seed;
+  const GlobalPositioningResult positioned =
+      SolveGlobalPositioning(positioning_input, positioning_options);
+  if (first) report->positioning = positioned.report;
+  const double seconds = timer.ElapsedSeconds();
+  report->seconds_positioning += seconds;
+  spdlog::info("global mapper: positions of {} frames and {} tracks ({} observations), {} "
+               "iterations, {:.1f} s{}",
+               positioned.camera_centres.size(), positioned.points.size(),
+               positioned.report.num_observations, positioned.report.num_iterations, seconds,
+               positioned.report.success ? "" : ": " + positioned.report.termination);
+  if (!positioned.report.success || positioned.camera_centres.size() < 2) {
+    spdlog::warn("global mapper: global positioning of {} frames failed ({}); no model of them",
+                 rotations.size(), positioned.report.termination);
+    return std::nullopt;
+  }
+  return BuildModel(input, mapper_options, options,
+                    CamFromWorldFromCentres(rotations, positioned.camera_centres), report,
+                    mapper_report);
 }
 
 }  // namespace
@@ -356,46 +446,36 @@ std::vector<Reconstruction> RunGlobalMapper(const MapperInput& input,
   *report = {};
   report->num_frames = static_cast<int>(input.frames.size());
 
-  const std::vector<PairPose> pair_poses = PairPoses(input, options);
-  const Rotations rotations = EstimateRotations(pair_poses, options, report);
-  if (rotations.size() < 2) {
-    spdlog::warn("global mapper: fewer than two frames are linked by verified pairs that agree; "
-                 "no model");
-    return {};
+  const FrameLookup lookup(input);
+  const std::vector<PairPose> pair_poses = PairPoses(input, lookup, options);
+  const std::vector<std::vector<RelativeRotation>> components =
+      CleanedComponents(pair_poses, options, mapper_options, report);
+  std::vector<Reconstruction> models;
+  for (size_t c = 0; c < components.size(); ++c) {
+    const Rotations rotations = AverageComponent(components[c], options, c == 0, report);
+    if (rotations.size() < 2) continue;
+    std::optional<Reconstruction> model =
+        MapComponent(input, lookup, mapper_options, options, pair_poses, rotations, c == 0,
+                     report, mapper_report);
+    if (model) models.push_back(std::move(*model));
   }
-
-  Timer timer;
-  GlobalPositioningInput positioning_input =
-      PositioningInput(input, rotations, pair_poses, options, &report->num_tracks_positioned);
-  GlobalPositioningOptions positioning_options = options.positioning;
-  positioning_options.num_threads = mapper_options.num_threads;
-  positioning_options.seed = mapper_options.seed;
-  const GlobalPositioningResult positioned =
-      SolveGlobalPositioning(positioning_input, positioning_options);
-  report->positioning = positioned.report;
-  report->seconds_positioning = timer.ElapsedSeconds();
-  spdlog::info("global mapper: positions of {} frames and {} tracks ({} observations), {} "
-               "iterations, {:.1f} s{}",
-               positioned.camera_centres.size(), positioned.points.size(),
-               positioned.report.num_observations, positioned.report.num_iterations,
-               report->seconds_positioning,
-               positioned.report.success ? "" : ": " + positioned.report.termination);
-  if (!positioned.report.success || positioned.camera_centres.size() < 2) {
-    spdlog::warn("global mapper: global positioning failed ({}); no model",
-                 positioned.report.termination);
-    return {};
+  if (models.empty()) {
+    spdlog::warn("global mapper: no part of the view graph could be mapped; no model");
+    return models;
   }
-
-  const std::map<image_t, Rigid3d> poses =
-      CamFromWorldFromCentres(rotations, positioned.camera_centres);
-  std::vector<Reconstruction> models =
-      BuildModel(input, mapper_options, options, poses, report, mapper_report);
-  report->num_registered = models.empty() ? 0 : static_cast<int>(models[0].NumRegImages());
+  // Frames dropped from a model can make a later one larger.
+  std::stable_sort(models.begin(), models.end(), [](const auto& a, const auto& b) {
+    return a.NumRegImages() > b.NumRegImages();
+  });
+  for (const Reconstruction& model : models) {
+    report->num_registered += static_cast<int>(model.NumRegImages());
+  }
   mapper_report->num_registered = report->num_registered;
   mapper_report->num_models = static_cast<int>(models.size());
-  spdlog::info("global mapper: {} of {} frames in the model ({} dropped for too few points), "
+  spdlog::info("global mapper: {} of {} frames in {} model{} ({} dropped for too few points), "
                "triangulation {:.1f} s, bundles {:.1f} s",
-               report->num_registered, report->num_frames, report->num_frames_dropped,
+               report->num_registered, report->num_frames, models.size(),
+               models.size() == 1 ? "" : "s", report->num_frames_dropped,
                report->seconds_triangulation, report->seconds_bundles);
   return models;
 }

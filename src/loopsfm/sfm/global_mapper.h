@@ -5,13 +5,13 @@
 //
 //  1. View graph: one edge per verified pair with a relative pose (the intrinsics given or
 //     self-calibrated before), weighted by its inliers; edges whose rotation disagrees
-//     around triangles are dropped and the largest connected component kept
-//     (matching/view_graph_cleaning.h).
+//     around triangles are dropped (matching/view_graph_cleaning.h). Each connected
+//     component left is mapped on its own through the stages below.
 //  2. Rotation averaging (estimators/rotation_averaging.h): every frame's rotation; edges
 //     that disagree with the result are counted out.
 //  3. Global positioning (estimators/global_positioning.h): camera centres and track
 //     positions together from the observations' bearings, with bounded residuals, from a
-//     random start. Camera-to-camera translation averaging degenerates where the camera
+//     start along the video's order. Camera-to-camera translation averaging degenerates where the camera
 //     moves along its own path, which is most of a video; the points make it well posed.
 //  4. Structure: every track triangulated from the poses (a track may hold several points,
 //     map_structure.h), then rounds of global bundle adjustment with re-triangulation,
@@ -31,9 +31,10 @@
 
 namespace loopsfm {
 
-// The model of the view graph's largest component (none when it has fewer than two frames
-// or a stage fails; the report says which). `mapper_report` gets the bundle counts and
-// times as the incremental mapper reports them.
+// A model per connected component of the cleaned view graph with at least the mapper
+// options' min_model_size frames (at most max_num_models), largest first; none for a
+// component where a stage fails (the log says which). `mapper_report` gets the bundle
+// counts and times as the incremental mapper reports them.
 std::vector<Reconstruction> RunGlobalMapper(const MapperInput& input,
                                             const IncrementalMapperOptions& mapper_options,
                                             const GlobalMapperOptions& options,

@@ -9,9 +9,11 @@
 namespace loopsfm {
 
 struct GlobalMapperOptions {
-  // Stage 1: the view graph's edges that disagree around triangles go, and only its largest
-  // connected component is kept.
-  ViewGraphCleaningOptions view_graph;
+  // Stage 1: the view graph's edges that disagree around triangles go. Each connected
+  // component left with at least the mapper's min_model_size frames becomes a model of its
+  // own, largest first, up to its max_num_models (IncrementalMapperOptions); with
+  // view_graph.keep_largest_component, only the largest does.
+  ViewGraphCleaningOptions view_graph{.keep_largest_component = false};
   // The pairs' verification settings (its inlier threshold), for the rotations of planar
   // pairs, which come from their F.
   TwoViewVerificationOptions verification;

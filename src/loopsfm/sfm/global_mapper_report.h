@@ -13,20 +13,27 @@ struct GlobalMapperReport {
   // Verified pairs with a relative pose that entered the view graph.
   int num_view_graph_edges = 0;
   ViewGraphCleaningReport view_graph;
+  // Connected components of the cleaned view graph, those mapped (at least min_model_size
+  // frames, at most max_num_models), and the frames of the others.
+  int num_components = 0;
+  int num_components_mapped = 0;
+  int num_frames_in_other_components = 0;
+  // Of the largest component (the first model).
   RotationAveragingReport rotations;
   // Edges left out after rotation averaging (residual above max_rotation_error_deg), and
-  // frames dropped for having no edge left.
+  // frames dropped for having no edge left, in all components.
   int num_rotation_outliers = 0;
   int num_frames_without_edges = 0;
-  // Tracks and observations that entered global positioning.
+  // Tracks that entered global positioning, in all components; the positioning report is
+  // the largest component's.
   int num_tracks_positioned = 0;
   GlobalPositioningReport positioning;
-  // Frames dropped after the bundles for seeing too few points.
+  // Frames dropped after the bundles for seeing too few points, in all models.
   int num_frames_dropped = 0;
-  // Frames of the input, and in the model at the end.
+  // Frames of the input, and in the models at the end.
   int num_frames = 0;
   int num_registered = 0;
-  // Seconds per stage.
+  // Seconds per stage, over all components.
   double seconds_view_graph = 0.0;
   double seconds_rotations = 0.0;
   double seconds_positioning = 0.0;

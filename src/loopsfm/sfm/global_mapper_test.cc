@@ -65,23 +65,64 @@ TEST(GlobalMapper, LoopWalkIsMappedWholeDespiteOutlierPairs) {
   EXPECT_GE(mapper_report.num_global_ba, 2);
 }
 
-TEST(GlobalMapper, OnlyTheLargestPartOfAViewGraphThatFallsApartIsMapped) {
+// A walk whose view graph falls apart at frame 25 (no pair across it): parts of 25 and 15
+// frames.
+MapperProblem WalkInTwoParts() {
   MapperProblemOptions options;
   options.num_frames = 40;
   MapperProblem p = MakeMapperProblem(options);
-  // No pair across frame 25: two parts, of 25 and 15 frames.
   std::erase_if(p.input.pairs, [&](const MapperPair& pair) {
     return (pair.pair.image_id1 <= 25) != (pair.pair.image_id2 <= 25);
   });
   testing::RebuildTracks(&p.input);
+  return p;
+}
+
+TEST(GlobalMapper, EachPartOfAViewGraphThatFallsApartIsAModel) {
+  const MapperProblem p = WalkInTwoParts();
   GlobalMapperReport report;
+  MapperReport mapper_report;
   const std::vector<Reconstruction> models =
-      RunGlobalMapper(p.input, OneThread(), GlobalMapperOptions(), &report, nullptr);
+      RunGlobalMapper(p.input, OneThread(), GlobalMapperOptions(), &report, &mapper_report);
+  ASSERT_EQ(models.size(), 2u);
+  EXPECT_EQ(models[0].NumRegImages(), 25u);
+  EXPECT_EQ(models[1].NumRegImages(), 15u);
+  EXPECT_TRUE(models[0].IsRegistered(1) && models[1].IsRegistered(26));
+  EXPECT_EQ(report.num_components, 2);
+  EXPECT_EQ(report.num_components_mapped, 2);
+  EXPECT_EQ(report.num_registered, 40);
+  EXPECT_EQ(mapper_report.num_models, 2);
+  EXPECT_EQ(mapper_report.num_registered, 40);
+  for (const Reconstruction& model : models) {
+    const testing::PoseError error = testing::ComparePoses(model, p);
+    EXPECT_LT(error.max_centre_error, 0.005);
+    EXPECT_LT(error.max_rotation_deg, 0.1);
+  }
+}
+
+TEST(GlobalMapper, PartsSmallerThanAModelOrBeyondTheLimitAreLeftOut) {
+  const MapperProblem p = WalkInTwoParts();
+  IncrementalMapperOptions mapper_options = OneThread();
+  mapper_options.min_model_size = 16;
+  GlobalMapperReport report;
+  std::vector<Reconstruction> models =
+      RunGlobalMapper(p.input, mapper_options, GlobalMapperOptions(), &report, nullptr);
+  ASSERT_EQ(models.size(), 1u);
+  EXPECT_EQ(models[0].NumRegImages(), 25u);
+  EXPECT_EQ(report.num_frames_in_other_components, 15);
+
+  mapper_options = OneThread();
+  mapper_options.max_num_models = 1;
+  models = RunGlobalMapper(p.input, mapper_options, GlobalMapperOptions(), &report, nullptr);
+  ASSERT_EQ(models.size(), 1u);
+  EXPECT_EQ(models[0].NumRegImages(), 25u);
+
+  GlobalMapperOptions largest_only;
+  largest_only.view_graph.keep_largest_component = true;
+  models = RunGlobalMapper(p.input, OneThread(), largest_only, &report, nullptr);
   ASSERT_EQ(models.size(), 1u);
   EXPECT_EQ(models[0].NumRegImages(), 25u);
   EXPECT_GT(report.view_graph.num_dropped_outside_component, 0);
-  const testing::PoseError error = testing::ComparePoses(models[0], p);
-  EXPECT_LT(error.max_centre_error, 0.005);
 }
 
 TEST(GlobalMapper, OptionsAreChecked) {
