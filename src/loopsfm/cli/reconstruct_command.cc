@@ -15,6 +15,7 @@ namespace {
 
 std::string IncrementalMapperSummary(const MapperReport& m);
 std::string GlobalMapperSummary(const GlobalMapperReport& g, const MapperReport& m);
+std::string SegmentSummary(const SegmentMappingReport& s);
 
 void PrintSummary(const ReconstructReport& report) {
   std::string out = "\n";
@@ -79,6 +80,7 @@ void PrintSummary(const ReconstructReport& report) {
   } else {
     out += IncrementalMapperSummary(report.mapper);
   }
+  if (report.segments) out += SegmentSummary(*report.segments);
   out += fmt::format("{:<28}{:.1f} s, peak memory {:.0f} MiB\n", "total", report.total_seconds,
                      report.peak_memory_bytes / 1048576.0);
   std::fputs(out.c_str(), stdout);
@@ -162,6 +164,27 @@ std::string GlobalMapperSummary(const GlobalMapperReport& g, const MapperReport&
   return out;
 }
 
+std::string SegmentSummary(const SegmentMappingReport& s) {
+  std::string out;
+  for (size_t k = 0; k < s.segments.size(); ++k) {
+    const SegmentReport& segment = s.segments[k];
+    out += fmt::format("{:<28}frames {}-{}: {} of {} registered ({} model{}), {} loop{} closed, "
+                       "{:.1f} s{}\n",
+                       fmt::format("  segment {}", k), segment.first_frame,
+                       segment.first_frame + segment.num_frames - 1, segment.num_registered,
+                       segment.num_frames, segment.num_models, segment.num_models == 1 ? "" : "s",
+                       segment.num_loops_closed, segment.num_loops_closed == 1 ? "" : "s",
+                       segment.seconds,
+                       k == 0             ? ""
+                       : segment.merged ? fmt::format(
+                                              "; merged into the one before ({} shared points "
+                                              "agree)",
+                                              segment.num_merge_inliers)
+                                        : "; not merged: starts a model of its own");
+  }
+  return out;
+}
+
 }  // namespace
 
 void AddReconstructCommand(CLI::App& app) {
@@ -183,6 +206,8 @@ void AddReconstructCommand(CLI::App& app) {
     bool localized_in_model = false;
     int fill_in_rounds = 3;
     double checkpoint_every = 60.0;
+    int segments = 1;
+    int segment_overlap = 20;
     uint64_t seed = kDefaultRandomSeed;
   };
   auto flags = std::make_shared<Flags>();
@@ -263,6 +288,21 @@ void AddReconstructCommand(CLI::App& app) {
                   "a rerun with the same seed repeats the model; other seeds show how much a "
                   "result owes to chance. Matching keeps its own seed")
       ->capture_default_str();
+  CLI::Option* segments =
+      cmd->add_option("--segments", flags->segments,
+                      "Incremental mapper: cut the frames into this many overlapping segments "
+                      "in capture order, map them at once (each with its share of --threads), "
+                      "merge them by their shared points, then close the loops between them "
+                      "(Sim3 pose graph) and refine the whole; no checkpoints. 1: the whole "
+                      "video at once")
+          ->check(CLI::PositiveNumber)
+          ->capture_default_str();
+  CLI::Option* segment_overlap =
+      cmd->add_option("--segment-overlap", flags->segment_overlap,
+                      "With --segments: frames each segment shares with the next (of the "
+                      "frames kept for mapping)")
+          ->check(CLI::Range(2, 1000000))
+          ->capture_default_str();
   CLI::Option* alternate_poses = cmd->add_flag("--alternate-poses", flags->alternate_poses,
                 "Diagnostic: after each registration, a second RANSAC over the correspondences "
                 "the first rejected; writes OUT/registrations.csv (both rounds' inliers, and "
@@ -280,12 +320,31 @@ void AddReconstructCommand(CLI::App& app) {
               option->get_name()));
         }
       }
+      if (segments->count() > 0) {
+        throw InvalidArgument("--segments are mapped by the incremental mapper; the global mapper "
+                              "maps the whole video at once: leave out one of them");
+      }
       options.mapper_kind = MapperKind::kGlobal;
     } else if (flags->mapper != "incremental") {
       throw InvalidArgument(fmt::format("--mapper '{}' is not a mapper; use incremental (the "
                                         "default) or global",
                                         flags->mapper));
     }
+    if (flags->segments > 1) {
+      for (const CLI::Option* option : {withhold, checkpoint_every}) {
+        if (option->count() > 0) {
+          throw InvalidArgument(fmt::format(
+              "{} does not go with --segments: segments are merged before the loop pairs come "
+              "in, and segment mapping has no checkpoints yet",
+              option->get_name()));
+        }
+      }
+    } else if (segment_overlap->count() > 0) {
+      throw InvalidArgument("--segment-overlap is the overlap of --segments: add --segments N "
+                            "(N > 1)");
+    }
+    options.segments.num_segments = flags->segments;
+    options.segments.overlap = flags->segment_overlap;
     options.extract = flags->extract.Resolve();
     if (fill_in_rounds->count() > 0 && options.extract.keyframes.mode == KeyframeMode::kWindows) {
       throw InvalidArgument("--fill-in-rounds fills gaps between adaptive keyframes: it cannot be "

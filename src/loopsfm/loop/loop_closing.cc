@@ -1,12 +1,10 @@
 #include "loopsfm/loop/loop_closing.h"
 
-#include <cstdlib>
-#include <unordered_map>
+#include <vector>
 
 #include "loopsfm/loop/loop_closure.h"
 #include "loopsfm/loop/track_split.h"
 #include "loopsfm/sfm/mapper_state.h"
-#include "loopsfm/tracks/track_builder.h"
 #include "loopsfm/util/logging.h"
 #include "loopsfm/util/timer.h"
 
@@ -50,26 +48,7 @@ std::vector<Reconstruction> Map(const MapperInput& input, const IncrementalMappe
 }  // namespace
 
 MapperInput WithoutLoopPairs(const MapperInput& input, int min_frame_gap) {
-  std::unordered_map<image_t, int> index;
-  std::unordered_map<image_t, size_t> num_points2D;
-  for (size_t i = 0; i < input.frames.size(); ++i) {
-    index[input.frames[i].image_id] = static_cast<int>(i);
-    num_points2D[input.frames[i].image_id] = input.frames[i].points2D.size();
-  }
-  MapperInput withheld;
-  withheld.cameras = input.cameras;
-  withheld.frames = input.frames;
-  for (const MapperPair& pair : input.pairs) {
-    if (std::abs(index.at(pair.pair.image_id1) - index.at(pair.pair.image_id2)) < min_frame_gap) {
-      withheld.pairs.push_back(pair);
-    }
-  }
-  std::vector<VerifiedPairMatches> verified;
-  for (const MapperPair& pair : withheld.pairs) {
-    verified.push_back({pair.pair, &pair.geometry.inlier_matches});
-  }
-  withheld.tracks = BuildTracks(num_points2D, verified, {}, nullptr);
-  return withheld;
+  return InputPart(input, 0, input.frames.size(), min_frame_gap);
 }
 
 Reconstruction CloseLoopsAfterMapping(const MapperInput& input, const Reconstruction& model,
@@ -78,16 +57,8 @@ Reconstruction CloseLoopsAfterMapping(const MapperInput& input, const Reconstruc
   Timer timer;
   MapperState state(input, options);
   Reconstruction& rec = state.reconstruction();
-  for (const auto& [id, camera] : model.Cameras()) rec.GetCamera(id) = camera;
-  std::vector<image_t> ordered;
-  for (const MapperFrame& frame : input.frames) {
-    if (!model.ExistsImage(frame.image_id) || !model.IsRegistered(frame.image_id)) continue;
-    rec.GetImage(frame.image_id).cam_from_world = model.GetImage(frame.image_id).cam_from_world;
-    rec.RegisterImage(frame.image_id);
-    ordered.push_back(frame.image_id);
-  }
+  const std::vector<image_t> ordered = state.TakeFramesOf(model);
   if (ordered.size() < 2) return model;
-  state.SetGauge(ordered[0], ordered[1]);
   for (image_t id : ordered) state.TriangulateImage(id);
   const double seconds_triangulation = timer.ElapsedSeconds();
   report->seconds_triangulation += seconds_triangulation;

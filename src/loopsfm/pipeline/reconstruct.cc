@@ -28,6 +28,13 @@ void ReconstructOptions::Check() const {
   self_calibration.Check();
   mapper.Check();
   global_mapper.Check();
+  segments.Check();
+  LOOPSFM_REQUIRE_OPTION(segments.num_segments == 1 || mapper_kind == MapperKind::kIncremental,
+                         "segments are mapped by the incremental mapper; the global mapper maps "
+                         "the whole video at once");
+  LOOPSFM_REQUIRE_OPTION(segments.num_segments == 1 || !mapper.loop_closure.withhold_loop_pairs,
+                         "segments withhold the loop pairs until they are merged already; leave "
+                         "out withhold_loop_pairs");
   output.Check();
 }
 
@@ -189,6 +196,21 @@ void FillInGaps(const fs::path& input, Database& database, const ReconstructOpti
 namespace {
 
 // The global mapper on the mapper input; its stages' times go to the report's stage times.
+std::vector<Reconstruction> MapSegmented(const MapperInput& mapper_input,
+                                         const ReconstructOptions& options, int pass,
+                                         ReconstructReport* report) {
+  report->segments.emplace();
+  std::vector<Reconstruction> models =
+      MapInSegments(mapper_input, options.mapper, options.segments, &*report->segments,
+                    &report->mapper);
+  const SegmentMappingReport& s = *report->segments;
+  const std::string suffix = pass == 0 ? "" : " (again)";
+  report->stage_times.push_back({"map: segments" + suffix, s.seconds_segments});
+  report->stage_times.push_back({"map: merge" + suffix, s.seconds_merging});
+  report->stage_times.push_back({"map: loops" + suffix, s.seconds_loops});
+  return models;
+}
+
 std::vector<Reconstruction> MapGlobally(const MapperInput& mapper_input,
                                         const ReconstructOptions& options, int pass,
                                         ReconstructReport* report) {
@@ -286,6 +308,8 @@ ReconstructReport Reconstruct(const fs::path& input, const fs::path& output_dir,
     stage.Restart();
     if (options.mapper_kind == MapperKind::kGlobal) {
       models = MapGlobally(mapper_input, options, pass, &report);
+    } else if (options.segments.num_segments > 1) {
+      models = MapSegmented(mapper_input, options, pass, &report);
     } else {
       nlohmann::json fingerprint;  // digests the whole mapper input: only with checkpoints
       std::optional<MapperCheckpoint> resume;

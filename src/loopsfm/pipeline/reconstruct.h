@@ -17,6 +17,7 @@
 #include "loopsfm/pipeline/extract.h"
 #include "loopsfm/pipeline/localize.h"
 #include "loopsfm/pipeline/match.h"
+#include "loopsfm/pipeline/segment_mapping.h"
 #include "loopsfm/sfm/global_mapper.h"
 #include "loopsfm/sfm/incremental_mapper.h"
 #include "loopsfm/sfm/self_calibration.h"
@@ -46,6 +47,9 @@ struct ReconstructOptions {
   MapperKind mapper_kind = MapperKind::kIncremental;
   IncrementalMapperOptions mapper;
   GlobalMapperOptions global_mapper;
+  // The incremental mapper on segments of the video (segment_mapping.h) where
+  // segments.num_segments > 1; no checkpoints then.
+  SegmentMappingOptions segments;
   // What is written after mapping.
   ExportOptions output;
   // Start again: delete OUT/database.db (and its journal) before the run, instead of
@@ -95,6 +99,8 @@ struct ReconstructReport {
   MapperReport mapper;
   // With the global mapper: its stages.
   std::optional<GlobalMapperReport> global_mapper;
+  // With segments: each segment's mapping and the merge.
+  std::optional<SegmentMappingReport> segments;
   // What the export wrote, with a summary of each model.
   ExportReport output;
   std::vector<StageTime> stage_times;

@@ -3,6 +3,8 @@
 // mappers never touch storage. Tracks are the ones built from matching (before any mapper
 // prunes them); the mapper keeps them unchanged for loop closing.
 
+#include <climits>
+#include <cstddef>
 #include <string>
 #include <vector>
 
@@ -37,5 +39,11 @@ struct MapperInput {
   // Conflict-free tracks over the verified matches.
   std::vector<Track> tracks;
 };
+
+// A part of the input: its frames [begin, end) in capture order, the pairs between them that
+// are fewer than max_frame_gap frames apart in capture order, and tracks rebuilt from those
+// pairs. The cameras are all kept. InvalidArgument for a range outside the frames.
+MapperInput InputPart(const MapperInput& input, size_t begin, size_t end,
+                      int max_frame_gap = INT_MAX);
 
 }  // namespace loopsfm

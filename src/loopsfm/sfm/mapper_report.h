@@ -41,6 +41,11 @@ struct RegistrationRounds {
 };
 
 struct MapperReport {
+  // Adds another run's counts, times and lists (the mapping of another part of the frames)
+  // to these: everything but num_models, num_registered and path_before_loop_closing, which
+  // only the caller knows how to combine.
+  void Add(const MapperReport& other);
+
   int num_models = 0;
   int num_registered = 0;
   // Initial pairs tried (two-view models built) and those that passed validation.

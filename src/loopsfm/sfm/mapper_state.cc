@@ -36,6 +36,20 @@ void MapperState::SetGauge(image_t first, image_t second) {
   gauge2_ = second;
 }
 
+std::vector<image_t> MapperState::TakeFramesOf(const Reconstruction& model) {
+  for (const auto& [id, camera] : model.Cameras()) reconstruction_.GetCamera(id) = camera;
+  std::vector<image_t> ordered;
+  for (const MapperFrame& frame : input_.frames) {
+    if (!model.ExistsImage(frame.image_id) || !model.IsRegistered(frame.image_id)) continue;
+    reconstruction_.GetImage(frame.image_id).cam_from_world =
+        model.GetImage(frame.image_id).cam_from_world;
+    reconstruction_.RegisterImage(frame.image_id);
+    ordered.push_back(frame.image_id);
+  }
+  if (ordered.size() >= 2) SetGauge(ordered[0], ordered[1]);
+  return ordered;
+}
+
 bool MapperState::NearRegisteredFrame(image_t image_id, int window) const {
   const int index = capture_index_.at(image_id);
   const int last = static_cast<int>(input_.frames.size()) - 1;

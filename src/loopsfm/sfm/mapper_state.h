@@ -29,6 +29,12 @@ class MapperState : public MapStructure {
   image_t GaugeFirst() const { return gauge1_; }
   image_t GaugeSecond() const { return gauge2_; }
 
+  // Takes over the poses of a model of the same frames (mapped from this input or a part of
+  // it, InputPart): its cameras' intrinsics, and each of its registered frames registered
+  // here at its pose, in capture order; the gauge goes to the first two. No point is
+  // triangulated. Returns the frames taken, in capture order.
+  std::vector<image_t> TakeFramesOf(const Reconstruction& model);
+
   // The model's state for a checkpoint (merge failures are the mapper's, left 0), and a
   // model restored from one (throws InputError when it does not fit the input).
   MapperCheckpoint::Model Save() const;

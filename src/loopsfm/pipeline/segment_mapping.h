@@ -1,0 +1,83 @@
+#pragma once
+// Mapping a long video in segments: its frames, in capture order, are cut into overlapping
+// segments; each segment is mapped on its own by the incremental mapper with loop closing
+// (loop/loop_closing.h), several at once; then the segment models are merged one after the
+// other by the similarity their shared frames' points give (sfm/model_merger.h), and the
+// loops between segments are closed on the merged model with the Sim3 pose graph and a
+// global bundle adjustment (CloseLoopsAfterMapping).
+//
+// Segments bound the cost of a registration by the segment's size, and they are what
+// several processes can map apart. The merge chain sees only the pairs between frames fewer
+// than loop_closure.min_frame_gap apart (the overlaps tie the segments together); the loop
+// pairs come back for the loop closing at the end, as with withheld loop pairs. A merge that
+// fails (too few shared points agree) starts a new model with the next segment.
+//
+//   SegmentMappingOptions segments;
+//   segments.num_segments = 4;
+//   std::vector<Reconstruction> models =
+//       MapInSegments(input, mapper_options, segments, &report, &mapper_report);
+
+#include <utility>
+#include <vector>
+
+#include "loopsfm/scene/reconstruction.h"
+#include "loopsfm/sfm/mapper_input.h"
+#include "loopsfm/sfm/mapper_options.h"
+#include "loopsfm/sfm/mapper_report.h"
+
+namespace loopsfm {
+
+struct SegmentMappingOptions {
+  // Segments the frames are cut into (1: the whole video at once, no segments).
+  int num_segments = 1;
+  // Frames each segment shares with the next, in capture order (of the frames the mapper
+  // gets, the keyframes); at least 2.
+  int overlap = 20;
+  // Segments mapped at once, each with its share of the mapper's threads (0: as many as the
+  // mapper has threads).
+  int num_parallel = 0;
+  void Check() const;  // throws InvalidArgument
+};
+
+struct SegmentReport {
+  // The segment's frames in capture order: [first_frame, first_frame + num_frames).
+  int first_frame = 0;
+  int num_frames = 0;
+  // Frames in its largest model (the one merged), and the models it made.
+  int num_registered = 0;
+  int num_models = 0;
+  int num_loops_closed = 0;
+  double seconds = 0.0;
+  // Merged into the model of the segment before (false for the first, and where the merge
+  // failed or this segment made no model).
+  bool merged = false;
+  int num_merge_inliers = 0;
+};
+
+struct SegmentMappingReport {
+  std::vector<SegmentReport> segments;
+  // Wall-clock time of the three stages: mapping the segments (at once), merging them, and
+  // closing the loops between them with the final refinement.
+  double seconds_segments = 0.0;
+  double seconds_merging = 0.0;
+  double seconds_loops = 0.0;
+};
+
+// The segments, as [begin, end) capture indices: num_segments of equal length (to one frame)
+// that share `overlap` frames with the next, covering the frames. Fewer when a segment would
+// have fewer than 2 * overlap frames (the log says so); one for num_segments 1.
+std::vector<std::pair<size_t, size_t>> PlanSegments(size_t num_frames, int num_segments,
+                                                    int overlap);
+
+// The models, largest first, as the incremental mapper's (at least min_model_size frames).
+// `mapper_report` gets every segment's counts and times (MapperReport::Add), then the loop
+// closing's; num_models and num_registered describe the models returned. InvalidArgument
+// for bad options and for withhold_loop_pairs (segments already map without the loop
+// pairs).
+std::vector<Reconstruction> MapInSegments(const MapperInput& input,
+                                          const IncrementalMapperOptions& mapper_options,
+                                          const SegmentMappingOptions& options,
+                                          SegmentMappingReport* report,
+                                          MapperReport* mapper_report);
+
+}  // namespace loopsfm

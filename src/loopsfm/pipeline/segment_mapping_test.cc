@@ -1,0 +1,109 @@
+#include "loopsfm/pipeline/segment_mapping.h"
+
+#include <gtest/gtest.h>
+
+#include "loopsfm/loop/loop_closing.h"
+#include "loopsfm/sfm/loop_test_problem.h"
+#include "loopsfm/sfm/sfm_test_problem.h"
+#include "loopsfm/util/errors.h"
+
+namespace loopsfm {
+namespace {
+
+using Plan = std::vector<std::pair<size_t, size_t>>;
+
+TEST(PlanSegments, CoversTheFramesWithEqualSegmentsThatOverlap) {
+  // 100 frames, 4 segments sharing 10: 4 x 33 - 3 x 10 = 102 >= 100.
+  EXPECT_EQ(PlanSegments(100, 4, 10), (Plan{{0, 33}, {23, 56}, {46, 79}, {69, 100}}));
+  EXPECT_EQ(PlanSegments(100, 1, 10), (Plan{{0, 100}}));
+  EXPECT_EQ(PlanSegments(0, 4, 10), Plan{});
+  // Segments shorter than twice the overlap are not made: 40 frames give 3 of 20, not 4.
+  EXPECT_EQ(PlanSegments(40, 4, 10), (Plan{{0, 20}, {10, 30}, {20, 40}}));
+  EXPECT_EQ(PlanSegments(15, 4, 10), (Plan{{0, 15}}));
+}
+
+TEST(SegmentMapping, OptionsAreChecked) {
+  SegmentMappingOptions options;
+  options.num_segments = 0;
+  EXPECT_THROW(options.Check(), InvalidArgument);
+  options = {};
+  options.overlap = 1;
+  EXPECT_THROW(options.Check(), InvalidArgument);
+  options = {};
+  options.num_parallel = -1;
+  EXPECT_THROW(options.Check(), InvalidArgument);
+  EXPECT_NO_THROW(SegmentMappingOptions().Check());
+
+  const testing::MapperProblem p = testing::MakeMapperProblem({});
+  IncrementalMapperOptions mapper_options = testing::LoopOptions();
+  mapper_options.loop_closure.withhold_loop_pairs = true;
+  EXPECT_THROW(MapInSegments(p.input, mapper_options, {}, nullptr, nullptr), InvalidArgument);
+}
+
+// The walk out and back (80 frames, a loop) in three segments: merged into one model of
+// every frame, as accurate as the whole walk mapped at once, the loop pairs between the
+// first and the last segment used at the end; and the same model whether the segments are
+// mapped one at a time or all at once.
+TEST(SegmentMapping, ThreeSegmentsOfALoopWalkMergeIntoOneModel) {
+  const testing::MapperProblem p = testing::WalkOutAndBack();
+  const IncrementalMapperOptions mapper_options = testing::LoopOptions();
+  SegmentMappingOptions options;
+  options.num_segments = 3;
+  options.overlap = 8;
+  SegmentMappingReport report;
+  MapperReport mapper_report;
+  const std::vector<Reconstruction> models =
+      MapInSegments(p.input, mapper_options, options, &report, &mapper_report);
+  ASSERT_EQ(models.size(), 1u);
+  ASSERT_EQ(report.segments.size(), 3u);
+  EXPECT_FALSE(report.segments[0].merged);
+  EXPECT_TRUE(report.segments[1].merged);
+  EXPECT_TRUE(report.segments[2].merged);
+  for (const SegmentReport& segment : report.segments) {
+    EXPECT_EQ(segment.num_registered, segment.num_frames);
+  }
+  EXPECT_EQ(models[0].NumRegImages(), 80u);
+  EXPECT_EQ(mapper_report.num_models, 1);
+  EXPECT_EQ(mapper_report.num_registered, 80);
+  const testing::PoseError error = testing::ComparePoses(models[0], p);
+
+  const std::vector<Reconstruction> whole = MapWithLoopClosing(p.input, mapper_options, nullptr);
+  ASSERT_FALSE(whole.empty());
+  const testing::PoseError whole_error = testing::ComparePoses(whole[0], p);
+  EXPECT_LT(error.max_centre_error, std::max(1.25 * whole_error.max_centre_error, 0.002));
+  EXPECT_LT(error.max_rotation_deg, std::max(1.25 * whole_error.max_rotation_deg, 0.1));
+
+  options.num_parallel = 3;
+  const std::vector<Reconstruction> at_once =
+      MapInSegments(p.input, mapper_options, options, nullptr, nullptr);
+  ASSERT_EQ(at_once.size(), 1u);
+  for (const image_t id : models[0].RegImageIds()) {
+    ASSERT_TRUE(at_once[0].IsRegistered(id));
+    EXPECT_EQ(at_once[0].GetImage(id).cam_from_world.translation,
+              models[0].GetImage(id).cam_from_world.translation);
+  }
+}
+
+// Segments that share no frame and no pair do not merge: two models.
+TEST(SegmentMapping, SegmentsThatShareNothingStayApart) {
+  testing::MapperProblemOptions problem;
+  problem.num_frames = 40;
+  testing::MapperProblem p = testing::MakeMapperProblem(problem);
+  // Two walks: no pair across frame 20 (the segments' overlap has only pairs to one side).
+  std::erase_if(p.input.pairs, [&](const MapperPair& pair) {
+    return (pair.pair.image_id1 <= 20) != (pair.pair.image_id2 <= 20);
+  });
+  testing::RebuildTracks(&p.input);
+  SegmentMappingOptions options;
+  options.num_segments = 2;
+  options.overlap = 4;
+  SegmentMappingReport report;
+  const std::vector<Reconstruction> models =
+      MapInSegments(p.input, testing::LoopOptions(), options, &report, nullptr);
+  ASSERT_EQ(report.segments.size(), 2u);
+  EXPECT_FALSE(report.segments[1].merged);
+  EXPECT_EQ(models.size(), 2u);
+}
+
+}  // namespace
+}  // namespace loopsfm
