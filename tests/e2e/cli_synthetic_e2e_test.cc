@@ -357,6 +357,48 @@ TEST_F(CliSyntheticTest, GlobalMapperMapsTheLoopWhole) {
   EXPECT_NE(refused.output.find("--loop-closing"), std::string::npos) << refused;
 }
 
+// The same database mapped in three segments (the loop's two ends fall in the first and the
+// last): merged into one model, as accurate as the bounds of the whole-video run, the summary
+// naming each segment. Flags that do not go with segments are refused before anything runs.
+TEST_F(CliSyntheticTest, SegmentsMergeIntoOneModelOfTheLoop) {
+  TempDir tmp;
+  fs::copy_file(run_->out / "database.db", tmp / "database.db");
+  const std::vector<std::string> args = {"reconstruct", (run_->scene / "video.mp4").string(),
+                                         "--intrinsics", (run_->scene / "intrinsics.txt").string(),
+                                         "-o", tmp.path().string(), "--every", "1",
+                                         "--segments", "3", "--segment-overlap", "6",
+                                         "--export", "colmap"};
+  const CommandResult segmented = RunLoopsfm(args);
+  ASSERT_EQ(segmented.exit_code, 0) << segmented;
+  EXPECT_NE(segmented.output.find("segment 2"), std::string::npos) << segmented;
+  EXPECT_NE(segmented.output.find("time map: merge"), std::string::npos) << segmented;
+  EXPECT_FALSE(fs::exists(tmp / "sparse" / "1")) << "the segments did not merge" << segmented;
+  const Reconstruction model = ReadColmapModel(tmp / "sparse" / "0");
+  const TrajectoryMetrics metrics = EvaluateTrajectory(model, GroundTruth());
+  ASSERT_TRUE(metrics.aligned) << metrics.explanation;
+  EXPECT_GE(metrics.fraction_registered, kMinFractionRegistered);
+  EXPECT_LT(metrics.ate_fraction_of_path, kMaxAteFractionOfPath);
+  EXPECT_LT(metrics.rotation_error_mean_deg, kMaxRotationErrorMeanDeg);
+  std::cout << fmt::format("[ info     ] 3 segments: {} / {} registered, ATE {:.4f} % of the "
+                           "path, rotation error mean {:.3f} deg\n",
+                           metrics.num_matched, metrics.num_gt_frames,
+                           100.0 * metrics.ate_fraction_of_path, metrics.rotation_error_mean_deg);
+
+  for (const std::vector<std::string>& extra :
+       {std::vector<std::string>{"--mapper", "global"}, {"--withhold-loop-pairs"},
+        {"--checkpoint-every", "10"}}) {
+    std::vector<std::string> refused_args = args;
+    refused_args.insert(refused_args.end(), extra.begin(), extra.end());
+    const CommandResult refused = RunLoopsfm(refused_args);
+    EXPECT_EQ(refused.exit_code, 2) << refused;
+    EXPECT_NE(refused.output.find("--segments"), std::string::npos) << refused;
+  }
+  const CommandResult overlap_alone = RunLoopsfm(
+      {"reconstruct", (run_->scene / "video.mp4").string(), "-o", tmp.path().string(),
+       "--segment-overlap", "6"});
+  EXPECT_EQ(overlap_alone.exit_code, 2) << overlap_alone;
+}
+
 TEST_F(CliSyntheticTest, SequentialPairsLeaveTheLoopOpenVocabTreeClosesIt) {
   TempDir tmp;
   const fs::path db = tmp / "database.db";
