@@ -8,6 +8,7 @@
 #include <thread>
 
 #include "loopsfm/loop/loop_closing.h"
+#include "loopsfm/sfm/incremental_mapper.h"
 #include "loopsfm/sfm/mapper_state.h"
 #include "loopsfm/sfm/model_merger.h"
 #include "loopsfm/util/errors.h"
@@ -113,14 +114,12 @@ std::vector<SegmentResult> MapSegments(const MapperInput& input,
 }
 
 // Stage 2: the segment models merged in capture order, each into the model before it, over
-// the input without its loop pairs (the overlaps' shared points align them). A merge that
-// fails ends a model; the next segment starts another.
-std::vector<Reconstruction> MergeSegments(const MapperInput& input,
+// the input without its loop pairs, `chain` (the overlaps' shared points align them). A merge
+// that fails ends a model; the next segment starts another.
+std::vector<Reconstruction> MergeSegments(const MapperInput& chain,
                                           const IncrementalMapperOptions& options,
                                           const std::vector<SegmentResult>& results,
                                           SegmentMappingReport* report) {
-  const MapperInput chain =
-      InputPart(input, 0, input.frames.size(), options.loop_closure.min_frame_gap);
   Random random(options.seed + 3);
   std::vector<Reconstruction> merged;
   std::unique_ptr<MapperState> dst;
@@ -174,8 +173,17 @@ std::vector<Reconstruction> MapInSegments(const MapperInput& input,
   }
   report->seconds_segments = timer.ElapsedSeconds();
 
+  // The frames a segment left out (where it broke into several models, only its largest
+  // was merged) are registered into the merged models by the incremental mapper, which also
+  // merges the models it can; the loop pairs stay out until the loops are closed.
   timer.Restart();
-  const std::vector<Reconstruction> chained = MergeSegments(input, mapper_options, results, report);
+  const MapperInput chain =
+      InputPart(input, 0, input.frames.size(), mapper_options.loop_closure.min_frame_gap);
+  IncrementalMapperOptions extend_options = mapper_options;
+  extend_options.loop_closure.method = LoopClosingMethod::kNone;
+  const std::vector<Reconstruction> chained = ExtendIncrementalModels(
+      input, extend_options, MergeSegments(chain, mapper_options, results, report),
+      mapper_report);
   report->seconds_merging = timer.ElapsedSeconds();
 
   timer.Restart();

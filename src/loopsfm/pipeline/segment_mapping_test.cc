@@ -42,8 +42,7 @@ TEST(SegmentMapping, OptionsAreChecked) {
 
 // The walk out and back (80 frames, a loop) in three segments: merged into one model of
 // every frame, as accurate as the whole walk mapped at once, the loop pairs between the
-// first and the last segment used at the end; and the same model whether the segments are
-// mapped one at a time or all at once.
+// first and the last segment used at the end.
 TEST(SegmentMapping, ThreeSegmentsOfALoopWalkMergeIntoOneModel) {
   const testing::MapperProblem p = testing::WalkOutAndBack();
   const IncrementalMapperOptions mapper_options = testing::LoopOptions();
@@ -72,17 +71,61 @@ TEST(SegmentMapping, ThreeSegmentsOfALoopWalkMergeIntoOneModel) {
   const testing::PoseError whole_error = testing::ComparePoses(whole[0], p);
   EXPECT_LT(error.max_centre_error, std::max(1.25 * whole_error.max_centre_error, 0.002));
   EXPECT_LT(error.max_rotation_deg, std::max(1.25 * whole_error.max_rotation_deg, 0.1));
+}
 
+// The same models whether the segments are mapped one at a time or all at once (each
+// segment's mapping depends only on its frames and the options).
+TEST(SegmentMapping, SegmentsMappedAtOnceGiveTheSameModel) {
+  testing::MapperProblemOptions problem;
+  problem.num_frames = 40;
+  const testing::MapperProblem p = testing::MakeMapperProblem(problem);
+  SegmentMappingOptions options;
+  options.num_segments = 3;
+  options.overlap = 6;
+  options.num_parallel = 1;
+  const std::vector<Reconstruction> one_at_a_time =
+      MapInSegments(p.input, testing::LoopOptions(), options, nullptr, nullptr);
   options.num_parallel = 3;
   const std::vector<Reconstruction> at_once =
-      MapInSegments(p.input, mapper_options, options, nullptr, nullptr);
+      MapInSegments(p.input, testing::LoopOptions(), options, nullptr, nullptr);
+  ASSERT_EQ(one_at_a_time.size(), 1u);
   ASSERT_EQ(at_once.size(), 1u);
-  for (const image_t id : models[0].RegImageIds()) {
+  EXPECT_EQ(one_at_a_time[0].NumRegImages(), 40u);
+  for (const image_t id : one_at_a_time[0].RegImageIds()) {
     ASSERT_TRUE(at_once[0].IsRegistered(id));
     EXPECT_EQ(at_once[0].GetImage(id).cam_from_world.translation,
-              models[0].GetImage(id).cam_from_world.translation);
+              one_at_a_time[0].GetImage(id).cam_from_world.translation);
   }
 }
+
+// A segment that breaks into two models: the second segment (frames 17-39) has no pair
+// across frame 24 within it, so it maps 24-39 and leaves 17-23 out; the first segment's
+// frames 17-22 and the pairs of frames before 17 with 24 and after tie the two segments
+// together. Frame 23, in no merged model, is registered after the merge: every frame ends
+// in one model.
+TEST(SegmentMapping, FramesASegmentLeftOutAreRegisteredAfterTheMerge) {
+  testing::MapperProblemOptions problem;
+  problem.num_frames = 40;
+  testing::MapperProblem p = testing::MakeMapperProblem(problem);
+  std::erase_if(p.input.pairs, [&](const MapperPair& pair) {
+    const image_t a = std::min(pair.pair.image_id1, pair.pair.image_id2);
+    const image_t b = std::max(pair.pair.image_id1, pair.pair.image_id2);
+    return a >= 18 && a <= 24 && b >= 25;  // image ids are frame indices + 1
+  });
+  testing::RebuildTracks(&p.input);
+  SegmentMappingOptions options;
+  options.num_segments = 2;
+  options.overlap = 6;
+  SegmentMappingReport report;
+  const std::vector<Reconstruction> models =
+      MapInSegments(p.input, testing::LoopOptions(), options, &report, nullptr);
+  ASSERT_EQ(report.segments.size(), 2u);
+  EXPECT_LT(report.segments[1].num_registered, report.segments[1].num_frames);
+  ASSERT_EQ(models.size(), 1u);
+  EXPECT_EQ(models[0].NumRegImages(), 40u);
+  EXPECT_LT(testing::ComparePoses(models[0], p).max_centre_error, 0.005);
+}
+
 
 // Segments that share no frame and no pair do not merge: two models.
 TEST(SegmentMapping, SegmentsThatShareNothingStayApart) {

@@ -51,6 +51,13 @@ class IncrementalMapper {
       }
     }
     last_checkpoint_.Restart();
+    if (!starts_.empty()) {
+      // The first start model grows; the others are kept, to be merged where it meets them.
+      for (size_t k = 1; k < starts_.size(); ++k) Keep(starts_[k]);
+      Grow(starts_[0]);
+      Keep(starts_[0]);
+      starts_.clear();
+    }
     while (!finished) {
       if (!model) {
         if (static_cast<int>(models_.size()) >= options_.max_num_models) break;
@@ -58,14 +65,7 @@ class IncrementalMapper {
         if (!model) break;
       }
       Grow(model);
-      if (static_cast<int>(model->reconstruction().NumRegImages()) >= options_.min_model_size) {
-        models_.push_back(std::move(model));
-      } else {
-        ++report_.num_models_discarded;
-        spdlog::info("mapper: discarded a model of {} frames; its frames stay free",
-                     model->reconstruction().NumRegImages());
-      }
-      model.reset();
+      Keep(model);
     }
     if (!finished) {
       MergeKeptModels();
@@ -88,7 +88,36 @@ class IncrementalMapper {
     return result;
   }
 
+  // Models to go on from (ExtendIncrementalModels), largest first: each takes over a model's
+  // poses and triangulates its tracks.
+  void SetStartModels(const std::vector<Reconstruction>& models) {
+    std::vector<const Reconstruction*> order;
+    for (const Reconstruction& model : models) order.push_back(&model);
+    std::stable_sort(order.begin(), order.end(), [](const auto* a, const auto* b) {
+      return a->NumRegImages() > b->NumRegImages();
+    });
+    for (const Reconstruction* model : order) {
+      auto state = std::make_unique<MapperState>(input_, options_);
+      if (state->TakeFramesOf(*model).size() < 2) continue;
+      state->RetriangulateAll();
+      state->FilterPoints({});
+      starts_.push_back(std::move(state));
+    }
+  }
+
  private:
+  // A grown model joins the kept ones if it is large enough; it is discarded otherwise.
+  void Keep(ModelPtr& model) {
+    if (static_cast<int>(model->reconstruction().NumRegImages()) >= options_.min_model_size) {
+      models_.push_back(std::move(model));
+    } else {
+      ++report_.num_models_discarded;
+      spdlog::info("mapper: discarded a model of {} frames; its frames stay free",
+                   model->reconstruction().NumRegImages());
+    }
+    model.reset();
+  }
+
   bool RegisteredInKeptModel(image_t id) const {
     return std::any_of(models_.begin(), models_.end(),
                        [&](const ModelPtr& m) { return m->reconstruction().IsRegistered(id); });
@@ -408,6 +437,7 @@ class IncrementalMapper {
   const MapperCheckpointing& checkpointing_;
   Random random_;
   MapperHook* hook_;
+  std::vector<ModelPtr> starts_;
   std::vector<ModelPtr> models_;
   std::unordered_map<const MapperState*, int> merge_failures_;
   std::vector<char> tried_;
@@ -429,6 +459,17 @@ std::vector<Reconstruction> RunIncrementalMapper(const MapperInput& input,
   MapperReport local;
   IncrementalMapper mapper(input, options, report ? report : &local, progress, checkpointing,
                            hook);
+  return mapper.Run();
+}
+
+std::vector<Reconstruction> ExtendIncrementalModels(const MapperInput& input,
+                                                    const IncrementalMapperOptions& options,
+                                                    const std::vector<Reconstruction>& models,
+                                                    MapperReport* report, MapperHook* hook) {
+  options.Check();
+  MapperReport local;
+  IncrementalMapper mapper(input, options, report ? report : &local, {}, {}, hook);
+  mapper.SetStartModels(models);
   return mapper.Run();
 }
 

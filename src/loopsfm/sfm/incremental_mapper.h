@@ -73,4 +73,15 @@ std::vector<Reconstruction> RunIncrementalMapper(const MapperInput& input,
                                                  const MapperCheckpointing& checkpointing = {},
                                                  MapperHook* hook = nullptr);
 
+// The incremental mapper going on from models mapped before, of the same frames (from this
+// input or parts of it, InputPart): each takes over a model's poses and triangulates its
+// tracks; the largest then grows by the frames no model has, merging with the others where
+// it meets them, and mapping goes on as RunIncrementalMapper's from the frames left. Models
+// sorted by size, largest first; no checkpoints.
+std::vector<Reconstruction> ExtendIncrementalModels(const MapperInput& input,
+                                                    const IncrementalMapperOptions& options,
+                                                    const std::vector<Reconstruction>& models,
+                                                    MapperReport* report,
+                                                    MapperHook* hook = nullptr);
+
 }  // namespace loopsfm
