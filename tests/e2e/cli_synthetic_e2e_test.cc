@@ -359,7 +359,8 @@ TEST_F(CliSyntheticTest, GlobalMapperMapsTheLoopWhole) {
 
 // The same database mapped in three segments (the loop's two ends fall in the first and the
 // last): merged into one model, as accurate as the bounds of the whole-video run, the summary
-// naming each segment. Flags that do not go with segments are refused before anything runs.
+// naming each segment; a rerun takes every segment from its checkpoint. Flags that do not go
+// with segments are refused before anything runs.
 TEST_F(CliSyntheticTest, SegmentsMergeIntoOneModelOfTheLoop) {
   TempDir tmp;
   fs::copy_file(run_->out / "database.db", tmp / "database.db");
@@ -379,14 +380,23 @@ TEST_F(CliSyntheticTest, SegmentsMergeIntoOneModelOfTheLoop) {
   EXPECT_GE(metrics.fraction_registered, kMinFractionRegistered);
   EXPECT_LT(metrics.ate_fraction_of_path, kMaxAteFractionOfPath);
   EXPECT_LT(metrics.rotation_error_mean_deg, kMaxRotationErrorMeanDeg);
+  EXPECT_TRUE(fs::exists(tmp / "segments" / "segment_2.bin")) << segmented;
+  const CommandResult rerun = RunLoopsfm(args);
+  ASSERT_EQ(rerun.exit_code, 0) << rerun;
+  for (int k = 0; k < 3; ++k) {  // the summary's line of each segment
+    EXPECT_TRUE(std::regex_search(rerun.output,
+                                  std::regex(fmt::format("  segment {} +frames [^\\n]* s \\(from "
+                                                         "its checkpoint\\)",
+                                                         k))))
+        << rerun;
+  }
   std::cout << fmt::format("[ info     ] 3 segments: {} / {} registered, ATE {:.4f} % of the "
                            "path, rotation error mean {:.3f} deg\n",
                            metrics.num_matched, metrics.num_gt_frames,
                            100.0 * metrics.ate_fraction_of_path, metrics.rotation_error_mean_deg);
 
   for (const std::vector<std::string>& extra :
-       {std::vector<std::string>{"--mapper", "global"}, {"--withhold-loop-pairs"},
-        {"--checkpoint-every", "10"}}) {
+       {std::vector<std::string>{"--mapper", "global"}, {"--withhold-loop-pairs"}}) {
     std::vector<std::string> refused_args = args;
     refused_args.insert(refused_args.end(), extra.begin(), extra.end());
     const CommandResult refused = RunLoopsfm(refused_args);

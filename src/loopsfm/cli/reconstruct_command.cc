@@ -169,12 +169,12 @@ std::string SegmentSummary(const SegmentMappingReport& s) {
   for (size_t k = 0; k < s.segments.size(); ++k) {
     const SegmentReport& segment = s.segments[k];
     out += fmt::format("{:<28}frames {}-{}: {} of {} registered ({} model{}), {} loop{} closed, "
-                       "{:.1f} s{}\n",
+                       "{:.1f} s{}{}\n",
                        fmt::format("  segment {}", k), segment.first_frame,
                        segment.first_frame + segment.num_frames - 1, segment.num_registered,
                        segment.num_frames, segment.num_models, segment.num_models == 1 ? "" : "s",
                        segment.num_loops_closed, segment.num_loops_closed == 1 ? "" : "s",
-                       segment.seconds,
+                       segment.seconds, segment.resumed ? " (from its checkpoint)" : "",
                        k == 0             ? ""
                        : segment.merged ? fmt::format(
                                               "; merged into the one before ({} shared points "
@@ -277,9 +277,10 @@ void AddReconstructCommand(CLI::App& app) {
                 "of resuming from them (needed when the input or the extract / match options "
                 "changed since they were made)");
   CLI::Option* checkpoint_every = cmd->add_option("--checkpoint-every", flags->checkpoint_every,
-                  "Save the mapping state to OUT/mapper_checkpoint.bin every this many seconds "
-                  "and when mapping ends; a rerun after an interruption goes on from it (and "
-                  "one after a finished run skips mapping). 0: no checkpoints")
+                  "Save the mapping state to OUT/mapper_checkpoint.bin (with --segments, each "
+                  "segment's to OUT/segments/) every this many seconds and when mapping ends; a "
+                  "rerun after an interruption goes on from it (and one after a finished run "
+                  "skips mapping). 0: no checkpoints")
       ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
   cmd->add_option("--seed", flags->seed,
@@ -293,8 +294,9 @@ void AddReconstructCommand(CLI::App& app) {
                       "Incremental mapper: cut the frames into this many overlapping segments "
                       "in capture order, map them at once (each with its share of --threads), "
                       "merge them by their shared points, then close the loops between them "
-                      "(Sim3 pose graph) and refine the whole; no checkpoints. 1: the whole "
-                      "video at once")
+                      "(Sim3 pose graph) and refine the whole; --checkpoint-every saves each "
+                      "segment to OUT/segments/, and a rerun maps only the unfinished ones. 1: "
+                      "the whole video at once")
           ->check(CLI::PositiveNumber)
           ->capture_default_str();
   CLI::Option* segment_overlap =
@@ -331,13 +333,9 @@ void AddReconstructCommand(CLI::App& app) {
                                         flags->mapper));
     }
     if (flags->segments > 1) {
-      for (const CLI::Option* option : {withhold, checkpoint_every}) {
-        if (option->count() > 0) {
-          throw InvalidArgument(fmt::format(
-              "{} does not go with --segments: segments are merged before the loop pairs come "
-              "in, and segment mapping has no checkpoints yet",
-              option->get_name()));
-        }
+      if (withhold->count() > 0) {
+        throw InvalidArgument("--withhold-loop-pairs does not go with --segments: segments are "
+                              "merged before the loop pairs come in already");
       }
     } else if (segment_overlap->count() > 0) {
       throw InvalidArgument("--segment-overlap is the overlap of --segments: add --segments N "

@@ -196,13 +196,20 @@ void FillInGaps(const fs::path& input, Database& database, const ReconstructOpti
 namespace {
 
 // The global mapper on the mapper input; its stages' times go to the report's stage times.
+// The incremental mapper on segments; with checkpoints, each segment's in
+// OUT/segments/segment_K.bin.
 std::vector<Reconstruction> MapSegmented(const MapperInput& mapper_input,
-                                         const ReconstructOptions& options, int pass,
+                                         const ReconstructOptions& options,
+                                         const fs::path& checkpoint_dir, int pass,
                                          ReconstructReport* report) {
   report->segments.emplace();
-  std::vector<Reconstruction> models =
-      MapInSegments(mapper_input, options.mapper, options.segments, &*report->segments,
-                    &report->mapper);
+  SegmentMappingOptions segments = options.segments;
+  if (options.checkpoint_interval_seconds > 0.0) {
+    segments.checkpoint_dir = checkpoint_dir;
+    segments.checkpoint_interval_seconds = options.checkpoint_interval_seconds;
+  }
+  std::vector<Reconstruction> models = MapInSegments(mapper_input, options.mapper, segments,
+                                                     &*report->segments, &report->mapper);
   const SegmentMappingReport& s = *report->segments;
   const std::string suffix = pass == 0 ? "" : " (again)";
   report->stage_times.push_back({"map: segments" + suffix, s.seconds_segments});
@@ -248,9 +255,11 @@ ReconstructReport Reconstruct(const fs::path& input, const fs::path& output_dir,
   }
   const fs::path database_path = output_dir / "database.db";
   const fs::path checkpoint_path = output_dir / "mapper_checkpoint.bin";
+  const fs::path segment_checkpoints = output_dir / "segments";
   if (options.overwrite) {
     for (const char* suffix : {"", "-wal", "-shm"}) fs::remove(database_path.string() + suffix);
     fs::remove(checkpoint_path);
+    fs::remove_all(segment_checkpoints);
   }
   Database database = Database::Open(database_path.string());
 
@@ -309,7 +318,7 @@ ReconstructReport Reconstruct(const fs::path& input, const fs::path& output_dir,
     if (options.mapper_kind == MapperKind::kGlobal) {
       models = MapGlobally(mapper_input, options, pass, &report);
     } else if (options.segments.num_segments > 1) {
-      models = MapSegmented(mapper_input, options, pass, &report);
+      models = MapSegmented(mapper_input, options, segment_checkpoints, pass, &report);
     } else {
       nlohmann::json fingerprint;  // digests the whole mapper input: only with checkpoints
       std::optional<MapperCheckpoint> resume;

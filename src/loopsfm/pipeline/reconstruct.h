@@ -48,7 +48,8 @@ struct ReconstructOptions {
   IncrementalMapperOptions mapper;
   GlobalMapperOptions global_mapper;
   // The incremental mapper on segments of the video (segment_mapping.h) where
-  // segments.num_segments > 1; no checkpoints then.
+  // segments.num_segments > 1; checkpoints (checkpoint_interval_seconds) then go to
+  // OUT/segments/, one per segment.
   SegmentMappingOptions segments;
   // What is written after mapping.
   ExportOptions output;

@@ -8,6 +8,7 @@
 #include <thread>
 
 #include "loopsfm/loop/loop_closing.h"
+#include "loopsfm/pipeline/mapper_checkpoint.h"
 #include "loopsfm/sfm/incremental_mapper.h"
 #include "loopsfm/sfm/mapper_state.h"
 #include "loopsfm/sfm/model_merger.h"
@@ -16,6 +17,7 @@
 #include "loopsfm/util/timer.h"
 
 namespace loopsfm {
+namespace fs = std::filesystem;
 
 void SegmentMappingOptions::Check() const {
   LOOPSFM_REQUIRE_OPTION(num_segments >= 1, "segments must be at least 1, got {}", num_segments);
@@ -23,6 +25,9 @@ void SegmentMappingOptions::Check() const {
                          overlap);
   LOOPSFM_REQUIRE_OPTION(num_parallel >= 0, "segments mapped at once must not be negative, got {}",
                          num_parallel);
+  LOOPSFM_REQUIRE_OPTION(checkpoint_interval_seconds >= 0.0,
+                         "segment checkpoint interval must not be negative, got {}",
+                         checkpoint_interval_seconds);
 }
 
 std::vector<std::pair<size_t, size_t>> PlanSegments(size_t num_frames, int num_segments,
@@ -57,14 +62,33 @@ struct SegmentResult {
   SegmentReport report;
 };
 
+// Maps frames [begin, end) of the input; with a checkpoint path, saves the mapping state
+// there now and then, and goes on from what is there.
 SegmentResult MapSegment(const MapperInput& input, const IncrementalMapperOptions& options,
-                         size_t begin, size_t end) {
+                         size_t begin, size_t end, const fs::path& checkpoint_path,
+                         double checkpoint_interval_seconds) {
   Timer timer;
   SegmentResult result;
   result.report.first_frame = static_cast<int>(begin);
   result.report.num_frames = static_cast<int>(end - begin);
+  const MapperInput part = InputPart(input, begin, end);
+  MapperCheckpointing checkpointing;
+  std::optional<MapperCheckpoint> resume;
+  nlohmann::json fingerprint;
+  if (!checkpoint_path.empty()) {
+    fingerprint = MapperCheckpointFingerprint(part, options);
+    resume = ReadMapperCheckpoint(checkpoint_path, fingerprint);
+    if (resume) {
+      checkpointing.resume = &*resume;
+      result.report.resumed = resume->finished;
+    }
+    checkpointing.interval_seconds = checkpoint_interval_seconds;
+    checkpointing.save = [&](const MapperCheckpoint& checkpoint) {
+      WriteMapperCheckpoint(checkpoint_path, checkpoint, fingerprint);
+    };
+  }
   std::vector<Reconstruction> models =
-      MapWithLoopClosing(InputPart(input, begin, end), options, &result.mapper_report);
+      MapWithLoopClosing(part, options, &result.mapper_report, {}, checkpointing);
   result.report.num_models = static_cast<int>(models.size());
   result.report.num_loops_closed = static_cast<int>(result.mapper_report.loops_closed.size());
   if (!models.empty()) {
@@ -72,9 +96,9 @@ SegmentResult MapSegment(const MapperInput& input, const IncrementalMapperOption
     result.model = std::move(models[0]);
   }
   result.report.seconds = timer.ElapsedSeconds();
-  spdlog::info("segment of frames {}-{}: {} registered in its largest model of {}, {:.1f} s",
+  spdlog::info("segment of frames {}-{}: {} registered in its largest model of {}, {:.1f} s{}",
                begin, end - 1, result.report.num_registered, result.report.num_models,
-               result.report.seconds);
+               result.report.seconds, result.report.resumed ? " (from its checkpoint)" : "");
   return result;
 }
 
@@ -93,11 +117,24 @@ std::vector<SegmentResult> MapSegments(const MapperInput& input,
   segment_options.num_threads = std::max(1, threads / std::max(parallel, 1));
   std::vector<SegmentResult> results(plan.size());
   std::vector<std::exception_ptr> errors(plan.size());
+  if (!options.checkpoint_dir.empty()) {
+    std::error_code ec;
+    fs::create_directories(options.checkpoint_dir, ec);
+    if (ec) {
+      throw StorageError(fmt::format("cannot create the segment checkpoint folder '{}': {}",
+                                     options.checkpoint_dir.string(), ec.message()));
+    }
+  }
   std::atomic<size_t> next{0};
   auto work = [&] {
     for (size_t k = next++; k < plan.size(); k = next++) {
       try {
-        results[k] = MapSegment(input, segment_options, plan[k].first, plan[k].second);
+        const fs::path checkpoint =
+            options.checkpoint_dir.empty()
+                ? fs::path()
+                : options.checkpoint_dir / fmt::format("segment_{}.bin", k);
+        results[k] = MapSegment(input, segment_options, plan[k].first, plan[k].second,
+                                checkpoint, options.checkpoint_interval_seconds);
       } catch (...) {
         errors[k] = std::current_exception();
       }

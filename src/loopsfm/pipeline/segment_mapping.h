@@ -17,6 +17,7 @@
 //   std::vector<Reconstruction> models =
 //       MapInSegments(input, mapper_options, segments, &report, &mapper_report);
 
+#include <filesystem>
 #include <utility>
 #include <vector>
 
@@ -36,6 +37,12 @@ struct SegmentMappingOptions {
   // Segments mapped at once, each with its share of the mapper's threads (0: as many as the
   // mapper has threads).
   int num_parallel = 0;
+  // Where set, each segment's mapping state is saved to checkpoint_dir/segment_K.bin (K its
+  // index) every checkpoint_interval_seconds and when it has finished (the mapper's
+  // checkpoint, pipeline/mapper_checkpoint.h, over the segment's frames), and a rerun goes on
+  // from there: a finished segment is not mapped again. Empty: no checkpoints.
+  std::filesystem::path checkpoint_dir;
+  double checkpoint_interval_seconds = 60.0;
   void Check() const;  // throws InvalidArgument
 };
 
@@ -48,6 +55,8 @@ struct SegmentReport {
   int num_models = 0;
   int num_loops_closed = 0;
   double seconds = 0.0;
+  // Taken from the checkpoint of a run before, which had finished it.
+  bool resumed = false;
   // Merged into the model of the segment before (false for the first, and where the merge
   // failed or this segment made no model).
   bool merged = false;
