@@ -182,6 +182,11 @@ std::string SegmentSummary(const SegmentMappingReport& s) {
                                               segment.num_merge_inliers)
                                         : "; not merged: starts a model of its own");
   }
+  if (s.extended) {
+    out += fmt::format("{:<28}frames left out or models apart: the incremental mapper went on "
+                       "from the merged models\n",
+                       "  after the merge");
+  }
   return out;
 }
 

@@ -210,17 +210,20 @@ std::vector<Reconstruction> MapInSegments(const MapperInput& input,
   }
   report->seconds_segments = timer.ElapsedSeconds();
 
-  // The frames a segment left out (where it broke into several models, only its largest
-  // was merged) are registered into the merged models by the incremental mapper, which also
-  // merges the models it can; the loop pairs stay out until the loops are closed.
+  // Where the merge left frames out (a segment that broke into several models gave only its
+  // largest) or several models, the incremental mapper goes on from the merged models over
+  // every pair: it registers the frames left and merges the models it can (without closing
+  // loops: that comes next, for the whole model).
   timer.Restart();
   const MapperInput chain =
       InputPart(input, 0, input.frames.size(), mapper_options.loop_closure.min_frame_gap);
-  IncrementalMapperOptions extend_options = mapper_options;
-  extend_options.loop_closure.method = LoopClosingMethod::kNone;
-  const std::vector<Reconstruction> chained = ExtendIncrementalModels(
-      input, extend_options, MergeSegments(chain, mapper_options, results, report),
-      mapper_report);
+  std::vector<Reconstruction> chained = MergeSegments(chain, mapper_options, results, report);
+  if (chained.size() != 1 || chained[0].NumRegImages() != input.frames.size()) {
+    IncrementalMapperOptions extend_options = mapper_options;
+    extend_options.loop_closure.method = LoopClosingMethod::kNone;
+    chained = ExtendIncrementalModels(input, extend_options, chained, mapper_report);
+    report->extended = true;
+  }
   report->seconds_merging = timer.ElapsedSeconds();
 
   timer.Restart();

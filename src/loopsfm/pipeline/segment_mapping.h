@@ -2,9 +2,10 @@
 // Mapping a long video in segments: its frames, in capture order, are cut into overlapping
 // segments; each segment is mapped on its own by the incremental mapper with loop closing
 // (loop/loop_closing.h), several at once; then the segment models are merged one after the
-// other by the similarity their shared frames' points give (sfm/model_merger.h), and the
-// loops between segments are closed on the merged model with the Sim3 pose graph and a
-// global bundle adjustment (CloseLoopsAfterMapping).
+// other by the similarity their shared frames' points give (sfm/model_merger.h); where that
+// leaves frames out or several models, the incremental mapper goes on from the merged models
+// (ExtendIncrementalModels); last, the loops between segments are closed on the merged model
+// with the Sim3 pose graph and a global bundle adjustment (CloseLoopsAfterMapping).
 //
 // Segments bound the cost of a registration by the segment's size, and they are what
 // several processes can map apart. The merge chain sees only the pairs between frames fewer
@@ -65,6 +66,9 @@ struct SegmentReport {
 
 struct SegmentMappingReport {
   std::vector<SegmentReport> segments;
+  // The merge left frames out or several models, and the incremental mapper went on from
+  // them (part of the merging time).
+  bool extended = false;
   // Wall-clock time of the three stages: mapping the segments (at once), merging them, and
   // closing the loops between them with the final refinement.
   double seconds_segments = 0.0;
