@@ -368,7 +368,7 @@ TEST_F(CliSyntheticTest, SegmentsMergeIntoOneModelOfTheLoop) {
                                          "--intrinsics", (run_->scene / "intrinsics.txt").string(),
                                          "-o", tmp.path().string(), "--every", "1",
                                          "--segments", "3", "--segment-overlap", "6",
-                                         "--export", "colmap"};
+                                         "--export", "colmap,report"};
   const CommandResult segmented = RunLoopsfm(args);
   ASSERT_EQ(segmented.exit_code, 0) << segmented;
   EXPECT_NE(segmented.output.find("segment 2"), std::string::npos) << segmented;
@@ -381,6 +381,9 @@ TEST_F(CliSyntheticTest, SegmentsMergeIntoOneModelOfTheLoop) {
   EXPECT_LT(metrics.ate_fraction_of_path, kMaxAteFractionOfPath);
   EXPECT_LT(metrics.rotation_error_mean_deg, kMaxRotationErrorMeanDeg);
   EXPECT_TRUE(fs::exists(tmp / "segments" / "segment_2.bin")) << segmented;
+  std::ifstream report(tmp / "report.html");
+  const std::string html((std::istreambuf_iterator<char>(report)), std::istreambuf_iterator<char>());
+  EXPECT_NE(html.find("\"mapper\":\"incremental, 3 segments\""), std::string::npos);
   const CommandResult rerun = RunLoopsfm(args);
   ASSERT_EQ(rerun.exit_code, 0) << rerun;
   for (int k = 0; k < 3; ++k) {  // the summary's line of each segment

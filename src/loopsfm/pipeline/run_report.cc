@@ -88,8 +88,10 @@ nlohmann::json RunReportData(const ReconstructReport& report,
   data["created"] = fmt::format("{:%Y-%m-%dT%H:%M:%SZ}", fmt::gmtime(std::time(nullptr)));
   size_t registered = 0;
   for (const Reconstruction& model : models) registered += model.NumRegImages();
+  std::string mapper = report.global_mapper ? "global" : "incremental";
+  if (report.segments) mapper += fmt::format(", {} segments", report.segments->segments.size());
   data["summary"] = {{"frames", report.num_frames},
-                     {"mapper", report.global_mapper ? "global" : "incremental"},
+                     {"mapper", mapper},
                      {"registered", registered},
                      {"models", models.size()},
                      {"total_seconds", report.total_seconds},
