@@ -502,4 +502,17 @@ std::optional<MapperCheckpoint> ReadMapperCheckpoint(const fs::path& path,
   return std::nullopt;
 }
 
+MapperCheckpointFile::MapperCheckpointFile(std::filesystem::path path, const MapperInput& input,
+                                           const IncrementalMapperOptions& options,
+                                           double interval_seconds)
+    : path_(std::move(path)),
+      fingerprint_(MapperCheckpointFingerprint(input, options)),
+      resume_(ReadMapperCheckpoint(path_, fingerprint_)) {
+  if (resume_) checkpointing_.resume = &*resume_;
+  checkpointing_.interval_seconds = interval_seconds;
+  checkpointing_.save = [this](const MapperCheckpoint& checkpoint) {
+    WriteMapperCheckpoint(path_, checkpoint, fingerprint_);
+  };
+}
+
 }  // namespace loopsfm

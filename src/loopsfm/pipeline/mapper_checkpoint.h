@@ -18,6 +18,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "loopsfm/sfm/incremental_mapper.h"
 #include "loopsfm/sfm/mapper_checkpoint.h"
 #include "loopsfm/sfm/mapper_input.h"
 
@@ -35,5 +36,26 @@ void WriteMapperCheckpoint(const std::filesystem::path& path, const MapperCheckp
 // says why). Never throws for the file's content: a checkpoint only saves time.
 std::optional<MapperCheckpoint> ReadMapperCheckpoint(const std::filesystem::path& path,
                                                      const nlohmann::json& fingerprint);
+
+// The checkpoint file of one mapping of `input`: the checkpoint it goes on from (where the
+// file holds one that fits) and the MapperCheckpointing that saves there every
+// interval_seconds. Not copied or moved: checkpointing() refers to it.
+class MapperCheckpointFile {
+ public:
+  MapperCheckpointFile(std::filesystem::path path, const MapperInput& input,
+                       const IncrementalMapperOptions& options, double interval_seconds);
+  MapperCheckpointFile(const MapperCheckpointFile&) = delete;
+  MapperCheckpointFile& operator=(const MapperCheckpointFile&) = delete;
+
+  const MapperCheckpointing& checkpointing() const { return checkpointing_; }
+  // The file held a finished mapping: the mapper only hands its models back.
+  bool Finished() const { return resume_ && resume_->finished; }
+
+ private:
+  std::filesystem::path path_;
+  nlohmann::json fingerprint_;
+  std::optional<MapperCheckpoint> resume_;
+  MapperCheckpointing checkpointing_;
+};
 
 }  // namespace loopsfm

@@ -320,21 +320,16 @@ ReconstructReport Reconstruct(const fs::path& input, const fs::path& output_dir,
     } else if (options.segments.num_segments > 1) {
       models = MapSegmented(mapper_input, options, segment_checkpoints, pass, &report);
     } else {
-      nlohmann::json fingerprint;  // digests the whole mapper input: only with checkpoints
-      std::optional<MapperCheckpoint> resume;
-      MapperCheckpointing checkpointing;
+      // The fingerprint digests the whole mapper input: only with checkpoints.
+      std::optional<MapperCheckpointFile> checkpoint;
       if (options.checkpoint_interval_seconds > 0.0) {
-        fingerprint = MapperCheckpointFingerprint(mapper_input, options.mapper);
-        resume = ReadMapperCheckpoint(checkpoint_path, fingerprint);
-        if (resume) checkpointing.resume = &*resume;
-        checkpointing.interval_seconds = options.checkpoint_interval_seconds;
-        checkpointing.save = [&](const MapperCheckpoint& checkpoint) {
-          WriteMapperCheckpoint(checkpoint_path, checkpoint, fingerprint);
-        };
+        checkpoint.emplace(checkpoint_path, mapper_input, options.mapper,
+                           options.checkpoint_interval_seconds);
       }
       Progress progress("map", mapper_input.frames.size(), options.show_progress);
       models = MapWithLoopClosing(mapper_input, options.mapper, &report.mapper,
-                                  [&](size_t, size_t) { progress.Advance(); }, checkpointing);
+                                  [&](size_t, size_t) { progress.Advance(); },
+                                  checkpoint ? checkpoint->checkpointing() : MapperCheckpointing{});
       report.stage_times.push_back({pass == 0 ? "map" : "map-again", stage.ElapsedSeconds()});
     }
     // Once per database: a rerun (which maps the fill-ins from the start) adds no more.

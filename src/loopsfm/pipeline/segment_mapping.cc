@@ -72,23 +72,14 @@ SegmentResult MapSegment(const MapperInput& input, const IncrementalMapperOption
   result.report.first_frame = static_cast<int>(begin);
   result.report.num_frames = static_cast<int>(end - begin);
   const MapperInput part = InputPart(input, begin, end);
-  MapperCheckpointing checkpointing;
-  std::optional<MapperCheckpoint> resume;
-  nlohmann::json fingerprint;
+  std::optional<MapperCheckpointFile> checkpoint;
   if (!checkpoint_path.empty()) {
-    fingerprint = MapperCheckpointFingerprint(part, options);
-    resume = ReadMapperCheckpoint(checkpoint_path, fingerprint);
-    if (resume) {
-      checkpointing.resume = &*resume;
-      result.report.resumed = resume->finished;
-    }
-    checkpointing.interval_seconds = checkpoint_interval_seconds;
-    checkpointing.save = [&](const MapperCheckpoint& checkpoint) {
-      WriteMapperCheckpoint(checkpoint_path, checkpoint, fingerprint);
-    };
+    checkpoint.emplace(checkpoint_path, part, options, checkpoint_interval_seconds);
+    result.report.resumed = checkpoint->Finished();
   }
   std::vector<Reconstruction> models =
-      MapWithLoopClosing(part, options, &result.mapper_report, {}, checkpointing);
+      MapWithLoopClosing(part, options, &result.mapper_report, {},
+                         checkpoint ? checkpoint->checkpointing() : MapperCheckpointing{});
   result.report.num_models = static_cast<int>(models.size());
   result.report.num_loops_closed = static_cast<int>(result.mapper_report.loops_closed.size());
   if (!models.empty()) {
