@@ -15,7 +15,8 @@ rotation error, loop gap.
       [--loopsfm build/loopsfm] [--threads 0]
 
 INTRINSICS '-' maps without intrinsics (self-calibration). A configuration is incremental,
-global, or segments:N (the incremental mapper on N segments, --segments N).
+global, or segments:N (the incremental mapper on N segments, --segments N); a suffix @R runs
+it under `mpirun -np R` (segments:4@2: four segments mapped on two ranks).
 """
 import argparse
 import json
@@ -40,8 +41,25 @@ def map_seconds(stages):
                if k in ('map', 'map-again') or k.startswith('map: '))
 
 
+MPIRUN_ENV = {'OMPI_ALLOW_RUN_AS_ROOT': '1', 'OMPI_ALLOW_RUN_AS_ROOT_CONFIRM': '1',
+              'OMPI_MCA_btl_vader_single_copy_mechanism': 'none'}
+
+
+def config_ranks(config):
+    """The configuration without its @R suffix, and R (1 without one)."""
+    name, _, ranks = config.partition('@')
+    if ranks and not ranks.isdigit():
+        sys.exit(f"configuration '{config}': the ranks after @ must be a number")
+    return name, int(ranks or 1)
+
+
+def folder_name(config):
+    return config.replace(':', '_').replace('@', '_r')
+
+
 def config_flags(config):
     """The reconstruct flags of a configuration."""
+    config, _ = config_ranks(config)
     if config in ('incremental', 'global'):
         return ['--mapper', config]
     if config.startswith('segments:') and config[len('segments:'):].isdigit():
@@ -55,13 +73,15 @@ def reconstruct(args, name, inp, intrinsics, folder, config, database=None):
     os.makedirs(folder)
     if database:
         shutil.copy(database, os.path.join(folder, 'database.db'))
-    cmd = [args.loopsfm, '--threads', str(args.threads), '-q', 'reconstruct', inp, '-o', folder,
-           '--export', 'colmap,report'] + config_flags(config)
+    _, ranks = config_ranks(config)
+    launcher = ['mpirun', '-np', str(ranks), '--oversubscribe'] if ranks > 1 else []
+    cmd = launcher + [args.loopsfm, '--threads', str(args.threads), '-q', 'reconstruct', inp,
+                      '-o', folder, '--export', 'colmap,report'] + config_flags(config)
     if config == 'incremental':
         cmd += ['--checkpoint-every', '0']
     if intrinsics != '-':
         cmd += ['--intrinsics', intrinsics]
-    result = subprocess.run(cmd, capture_output=True, text=True)
+    result = subprocess.run(cmd, capture_output=True, text=True, env={**os.environ, **MPIRUN_ENV})
     if result.returncode != 0:
         sys.exit(f'{name} {config}: loopsfm failed ({result.returncode}):\n{result.stderr[-2000:]}')
     return map_seconds(report_stages(folder))
@@ -105,11 +125,11 @@ def main():
         times = {config: [] for config in configs}
         for run in range(args.runs):
             for config in configs:
-                folder = os.path.join(base, f"{config.replace(':', '_')}_{run}")
+                folder = os.path.join(base, f'{folder_name(config)}_{run}')
                 times[config].append(reconstruct(args, name, inp, intrinsics, folder, config,
                                                  database))
         for config in configs:
-            folder = os.path.join(base, f"{config.replace(':', '_')}_{args.runs - 1}")
+            folder = os.path.join(base, f'{folder_name(config)}_{args.runs - 1}')
             metrics = evaluate(args, folder, groundtruth)
             rows.append((name, config, times[config], metrics))
             print(json.dumps({'set': name, 'config': config, 'map_seconds': times[config],

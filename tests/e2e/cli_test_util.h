@@ -167,6 +167,8 @@ struct DatabaseSnapshot {
   std::vector<std::string> descriptor_bytes;
   std::vector<std::pair<std::pair<image_t, image_t>, size_t>> matches;
   std::vector<std::tuple<image_t, image_t, int, int>> verified;  // id1, id2, inliers, config
+  // Per pair with a geometry: its raw matches, inlier matches, F, E, H and relative pose.
+  std::vector<std::string> pair_bytes;
 
   friend bool operator==(const DatabaseSnapshot&, const DatabaseSnapshot&) = default;
 };
@@ -204,6 +206,19 @@ inline DatabaseSnapshot SnapshotDatabase(const fs::path& path) {
   for (const VerifiedPair& pair : database.ReadVerifiedPairs()) {
     snapshot.verified.emplace_back(pair.pair.image_id1, pair.pair.image_id2, pair.num_inliers,
                                    pair.config);
+  }
+  for (const auto& [pair, geometry] : database.ReadAllTwoViewGeometries()) {
+    auto append = [bytes = &snapshot.pair_bytes.emplace_back()](const void* data, size_t size) {
+      bytes->append(static_cast<const char*>(data), size);
+    };
+    const FeatureMatches matches = database.ReadMatches(pair.image_id1, pair.image_id2);
+    append(matches.data(), matches.size() * sizeof(FeatureMatch));
+    append(geometry.inlier_matches.data(), geometry.inlier_matches.size() * sizeof(FeatureMatch));
+    for (const Eigen::Matrix3d* m : {&geometry.F, &geometry.E, &geometry.H}) {
+      append(m->data(), 9 * sizeof(double));
+    }
+    append(geometry.cam2_from_cam1.rotation.coeffs().data(), 4 * sizeof(double));
+    append(geometry.cam2_from_cam1.translation.data(), 3 * sizeof(double));
   }
   return snapshot;
 }

@@ -1,4 +1,5 @@
 #include <filesystem>
+#include <fstream>
 
 #include <fmt/format.h>
 
@@ -10,6 +11,12 @@ namespace loopsfm::cli {
 CommonFlags& Common() {
   static CommonFlags flags;  // parsed once by main; read by the subcommand callbacks
   return flags;
+}
+
+void WriteJsonReport(const std::string& path, const nlohmann::json& report) {
+  std::ofstream out(path);
+  out << report.dump(2) << "\n";
+  if (!out) throw StorageError(fmt::format("cannot write '{}'", path));
 }
 
 Database OpenExistingDatabase(const std::string& path) {

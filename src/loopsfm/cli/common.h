@@ -3,6 +3,9 @@
 
 #include <string>
 
+#include <nlohmann/json.hpp>
+
+#include "loopsfm/pipeline/work_sharing.h"
 #include "loopsfm/storage/database.h"
 
 namespace loopsfm::cli {
@@ -12,9 +15,15 @@ struct CommonFlags {
   int threads = 0;
   bool verbose = false;
   bool quiet = false;
+  // The other ranks of an MPI run, which extraction and matching share their work with
+  // (null: this process alone).
+  WorkSharing* sharing = nullptr;
 };
 // The global flags, parsed once by main() before any subcommand callback runs.
 CommonFlags& Common();
+
+// Writes a stage's report as JSON (--json-report); StorageError when it cannot.
+void WriteJsonReport(const std::string& path, const nlohmann::json& report);
 
 // Opens a database that a previous stage created; InputError naming the stage to run when
 // it does not exist (instead of silently creating an empty one).

@@ -8,7 +8,7 @@ namespace loopsfm::cli {
 
 void AddExtractCommand(CLI::App& app) {
   struct Flags {
-    std::string input, database;
+    std::string input, database, json_report;
     ExtractFlags extract;
   };
   auto flags = std::make_shared<Flags>();
@@ -19,6 +19,8 @@ void AddExtractCommand(CLI::App& app) {
   cmd->add_option("-d,--database", flags->database, "Database file (created if missing)")
       ->required();
   AddExtractFlags(cmd, &flags->extract);
+  cmd->add_option("--json-report", flags->json_report,
+                  "Also write the stage report (frames, features, timings) as JSON");
   cmd->callback([flags] {
     const ExtractOptions options = flags->extract.Resolve();
     // Refuse a bad input before the database file is created.
@@ -31,6 +33,8 @@ void AddExtractCommand(CLI::App& app) {
         report.frames_decoded, report.frames_extracted, report.frames_resumed,
         report.unreadable_images, report.num_cameras, report.FeaturesPerFrame(),
         report.FramesPerSecond(), report.seconds, PeakResidentBytes() / (1024.0 * 1024.0));
+    LogRankShares("extract: frames", report.frames_per_rank);
+    if (!flags->json_report.empty()) WriteJsonReport(flags->json_report, ToJson(report));
   });
 }
 

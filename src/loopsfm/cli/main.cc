@@ -1,7 +1,10 @@
 // loopsfm: camera path and sparse 3D structure from video.
 
 #include <cstdio>
+#include <algorithm>
 #include <cstdlib>
+#include <memory>
+#include <optional>
 #include <string>
 
 #include <CLI/CLI.hpp>
@@ -12,6 +15,8 @@
 #endif
 
 #include "loopsfm/cli/commands.h"
+#include "loopsfm/pipeline/mpi_ranks.h"
+#include "loopsfm/pipeline/work_sharing.h"
 #include "loopsfm/util/errors.h"
 #include "loopsfm/util/logging.h"
 
@@ -32,10 +37,44 @@ std::string AllocatorName() {
   return "the C library's malloc";
 }
 
+// The value of --threads in the command line (0 when absent), for ranks that serve rank 0
+// and do not run the command.
+int ThreadsFlag(int argc, char** argv) {
+  for (int i = 1; i < argc; ++i) {
+    const std::string arg = argv[i];
+    if (arg == "--threads" && i + 1 < argc) return std::max(0, std::atoi(argv[i + 1]));
+    if (arg.rfind("--threads=", 0) == 0) return std::max(0, std::atoi(arg.c_str() + 10));
+  }
+  return 0;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
   using namespace loopsfm;
+  // Started by mpirun or srun with several processes: rank 0 runs the command, the other
+  // ranks compute what it shares out (extraction, matching) until it is done.
+  std::unique_ptr<Ranks> ranks;
+  if (LaunchedProcessCount() > 1) {
+    try {
+      ranks = StartMpi(&argc, &argv);
+    } catch (const Error& e) {
+      std::fprintf(stderr, "loopsfm: error: %s\n", e.what());
+      return 2;
+    }
+    if (ranks->Rank() > 0) {
+      SetupLogging(Verbosity::kQuiet);
+      try {
+        ServeStageWork(*ranks, ThreadsFlag(argc, argv));
+      } catch (const std::exception& e) {
+        std::fprintf(stderr, "loopsfm: rank %d: %s\n", ranks->Rank(), e.what());
+        return 1;
+      }
+      return 0;
+    }
+  }
+  // Declared after the ranks: it tells them the run is over before MPI ends.
+  std::optional<WorkSharing> sharing;
   FLAGS_logtostderr = true;
   FLAGS_minloglevel = google::GLOG_ERROR;
   google::InitGoogleLogging(argv[0]);
@@ -43,8 +82,9 @@ int main(int argc, char** argv) {
   app.require_subcommand(1);
   // --threads, -v and -q work after the subcommand too (`loopsfm reconstruct ... -q`).
   app.fallthrough();
-  app.set_version_flag("--version", fmt::format("loopsfm 0.1.0 (memory allocator: {})",
-                                                AllocatorName()));
+  app.set_version_flag("--version", fmt::format("loopsfm 0.1.0 (memory allocator: {}; MPI: {})",
+                                                AllocatorName(),
+                                                BuiltWithMpi() ? "yes" : "no, one process"));
   auto& common = cli::Common();
   app.add_option("--threads", common.threads, "Worker threads (0: all cores)")->capture_default_str();
   app.add_flag("-v,--verbose", common.verbose, "More log output");
@@ -56,6 +96,10 @@ int main(int argc, char** argv) {
     // solve that failed and was retried with more damping) are the solver's own business and
     // show only with -v; its errors always do.
     FLAGS_minloglevel = common.verbose ? google::GLOG_WARNING : google::GLOG_ERROR;
+    if (ranks) {
+      common.sharing = &sharing.emplace(ranks.get(), common.threads);
+      spdlog::info("MPI: {} ranks share extraction and matching", ranks->Size());
+    }
   });
 
   cli::AddReconstructCommand(app);

@@ -49,11 +49,8 @@ void AddMatchCommand(CLI::App& app) {
         PairStrategyName(options.strategy), report.kernel, report.num_pairs, report.num_pairs_resumed,
         report.num_pairs_matched, report.num_pairs_verified, report.MeanInliers(),
         report.median_match_ms, report.median_verify_ms, report.seconds);
-    if (!flags->json_report.empty()) {
-      std::ofstream out(flags->json_report);
-      out << ToJson(report).dump(2) << "\n";
-      if (!out) throw StorageError(fmt::format("cannot write '{}'", flags->json_report));
-    }
+    LogRankShares("match: pairs", report.pairs_per_rank);
+    if (!flags->json_report.empty()) WriteJsonReport(flags->json_report, ToJson(report));
     TrackBuildReport tracks;
     BuildTracksFromDatabase(database, {}, &tracks);
     LogTrackReport(tracks);

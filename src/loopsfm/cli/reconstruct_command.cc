@@ -348,6 +348,7 @@ void AddReconstructCommand(CLI::App& app) {
     }
     options.segments.num_segments = flags->segments;
     options.segments.overlap = flags->segment_overlap;
+    options.segments.sharing = Common().sharing;
     options.extract = flags->extract.Resolve();
     if (fill_in_rounds->count() > 0 && options.extract.keyframes.mode == KeyframeMode::kWindows) {
       throw InvalidArgument("--fill-in-rounds fills gaps between adaptive keyframes: it cannot be "

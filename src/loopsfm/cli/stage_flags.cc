@@ -78,6 +78,7 @@ ExtractOptions ExtractFlags::Resolve() const {
   }
   resolved.sift.root_sift = !no_root_sift;
   resolved.num_threads = Common().threads;
+  resolved.sharing = Common().sharing;
   resolved.show_progress = !Common().quiet;
   if (!intrinsics.empty()) resolved.intrinsics = ReadIntrinsicsFile(intrinsics);
   if (!camera_model.empty()) {
@@ -170,6 +171,7 @@ MatchOptions MatchFlags::Resolve() const {
     throw InvalidArgument(fmt::format("--match-kernel (or LOOPSFM_MATCH_KERNEL): {}", e.what()));
   }
   resolved.num_threads = Common().threads;
+  resolved.sharing = Common().sharing;
   resolved.show_progress = !Common().quiet;
   resolved.Check();
   return resolved;

@@ -2,15 +2,16 @@
 #include "loopsfm/pipeline/fingerprint.h"
 
 #include <map>
+#include <memory>
+#include <mutex>
 #include <set>
 #include <unordered_set>
 
 #include <nlohmann/json.hpp>
 #include <opencv2/core.hpp>
-#include <tbb/global_control.h>
 #include <tbb/parallel_for.h>
-#include <tbb/parallel_pipeline.h>
 
+#include "loopsfm/pipeline/wire_format.h"
 #include "loopsfm/util/errors.h"
 #include "loopsfm/util/logging.h"
 #include "loopsfm/util/progress.h"
@@ -106,7 +107,27 @@ void StoreFrame(const Keyframe& keyframe, int width, int height, const FeatureSe
   transaction.Commit();
 }
 
+void PutSiftRequest(ByteWriter& request, const SiftInput& input, const SiftOptions& options) {
+  request.Put(options);
+  request.Put(input.scale_x);
+  request.Put(input.scale_y);
+  PutGreyImage(request, input.grey);
+}
+
 }  // namespace
+
+WorkHandler SiftWorkHandler() {
+  return [](ByteReader& request) {
+    const auto options = request.Get<SiftOptions>();
+    SiftInput input;
+    input.scale_x = request.Get<double>();
+    input.scale_y = request.Get<double>();
+    input.grey = GetGreyImage(request);
+    return [options, input = std::move(input)](ByteWriter& result) {
+      PutFeatures(result, ExtractSift(input, options));
+    };
+  };
+}
 
 ExtractReport ExtractFillInFrames(const std::filesystem::path& input, Database& database,
                                   const ExtractOptions& options,
@@ -157,9 +178,6 @@ ExtractReport ExtractFeatures(const std::filesystem::path& input, Database& data
   KeyframeSelector selector(*source, keyframe_options);
   CameraRegistry cameras(database, options.intrinsics, options.camera_model);
 
-  const int threads = options.num_threads > 0 ? options.num_threads
-                                              : std::max(1, cv::getNumberOfCPUs());
-  tbb::global_control limit(tbb::global_control::max_allowed_parallelism, threads);
   // Parallelism is across frames; OpenCV's own threads inside one frame would oversubscribe.
   const int previous_cv_threads = cv::getNumThreads();
   cv::setNumThreads(1);
@@ -177,60 +195,84 @@ ExtractReport ExtractFeatures(const std::filesystem::path& input, Database& data
                            : source->Info().expected_frames / options.keyframes.every;
   Progress progress("extract", expected > 0 ? expected : 0, options.show_progress);
   ExtractReport report;
-  // Names of frames stored with features by an earlier run. Read up front: the database is
-  // only touched by the last (writing) filter, never from two pipeline threads at once.
+  // Names of frames stored with features by an earlier run.
   std::unordered_set<std::string> already_extracted;
   for (const Frame& frame : database.ReadFrames()) {
     if (database.HasFeatures(frame.image_id)) already_extracted.insert(frame.name);
   }
+  std::optional<WorkSharing> own_sharing;
+  WorkSharing& sharing = options.sharing ? *options.sharing
+                                         : own_sharing.emplace(nullptr, options.num_threads);
+  // Frames being extracted, by unit. Units are added and removed on this thread and looked
+  // up from the computing threads: the lock guards the map, not the items.
+  std::map<size_t, std::unique_ptr<WorkItem>> open;
+  std::mutex open_mutex;
+  auto item_of = [&](size_t i) -> WorkItem& {
+    std::lock_guard<std::mutex> lock(open_mutex);
+    return *open.at(i);
+  };
+  WorkSharing::Job job;
+  job.kind = WorkKind::kExtractSift;
+  job.next = [&](size_t i) {
+    // Decoding and keyframe selection run here, in frame order.
+    Timer decode_timer;
+    std::optional<Keyframe> keyframe = selector.Next();
+    if (!keyframe) {
+      report.decode_seconds += decode_timer.ElapsedSeconds();
+      return false;
+    }
+    auto item = std::make_unique<WorkItem>();
+    item->keyframe = std::move(*keyframe);
+    cv::Mat& image = item->keyframe.frame.image;
+    item->width = image.cols;
+    item->height = image.rows;
+    item->resumed = already_extracted.count(item->keyframe.frame.name) > 0;
+    if (!item->resumed) item->sift_input = PrepareSiftInput(image, options.sift);
+    image.release();
+    report.decode_seconds += decode_timer.ElapsedSeconds();
+    std::lock_guard<std::mutex> lock(open_mutex);
+    open.emplace(i, std::move(item));
+    return true;
+  };
+  job.has_work = [&](size_t i) { return !item_of(i).resumed; };
+  job.compute = [&](size_t i) {
+    WorkItem& item = item_of(i);
+    item.features = ExtractSift(item.sift_input, options.sift);
+    item.sift_input = SiftInput();
+  };
+  job.request = [&](size_t i, int, ByteWriter& request) {
+    WorkItem& item = item_of(i);
+    PutSiftRequest(request, item.sift_input, options.sift);
+    item.sift_input = SiftInput();
+  };
+  job.take_result = [&](size_t i, int, ByteReader& result) {
+    item_of(i).features = GetFeatures(result);
+  };
+  job.finish = [&](size_t i) {
+    std::unique_ptr<WorkItem> item;
+    {
+      std::lock_guard<std::mutex> lock(open_mutex);
+      item = std::move(open.at(i));
+      open.erase(i);
+    }
+    ++report.frames_decoded;
+    progress.Advance();
+    if (item->resumed) {
+      ++report.frames_resumed;
+      return;
+    }
+    StoreFrame(item->keyframe, item->width, item->height, item->features, cameras, database);
+    ++report.frames_extracted;
+    report.num_features += item->features.Size();
+  };
   try {
-    tbb::parallel_pipeline(
-        static_cast<size_t>(2 * threads),
-        tbb::make_filter<void, std::shared_ptr<WorkItem>>(
-            tbb::filter_mode::serial_in_order,
-            [&](tbb::flow_control& fc) -> std::shared_ptr<WorkItem> {
-              std::optional<Keyframe> keyframe = selector.Next();
-              if (!keyframe) {
-                fc.stop();
-                return nullptr;
-              }
-              auto item = std::make_shared<WorkItem>();
-              item->keyframe = std::move(*keyframe);
-              cv::Mat& image = item->keyframe.frame.image;
-              item->width = image.cols;
-              item->height = image.rows;
-              item->resumed = already_extracted.count(item->keyframe.frame.name) > 0;
-              if (!item->resumed) item->sift_input = PrepareSiftInput(image, options.sift);
-              image.release();
-              return item;
-            }) &
-            tbb::make_filter<std::shared_ptr<WorkItem>, std::shared_ptr<WorkItem>>(
-                tbb::filter_mode::parallel,
-                [&](std::shared_ptr<WorkItem> item) {
-                  if (!item->resumed) {
-                    item->features = ExtractSift(item->sift_input, options.sift);
-                    item->sift_input = SiftInput();
-                  }
-                  return item;
-                }) &
-            tbb::make_filter<std::shared_ptr<WorkItem>, void>(
-                tbb::filter_mode::serial_in_order, [&](std::shared_ptr<WorkItem> item) {
-                  ++report.frames_decoded;
-                  progress.Advance();
-                  if (item->resumed) {
-                    ++report.frames_resumed;
-                    return;
-                  }
-                  StoreFrame(item->keyframe, item->width, item->height, item->features,
-                             cameras, database);
-                  ++report.frames_extracted;
-                  report.num_features += item->features.Size();
-                }));
+    sharing.Run(job);
   } catch (...) {
     cv::setNumThreads(previous_cv_threads);
     throw;
   }
   cv::setNumThreads(previous_cv_threads);
+  report.frames_per_rank = sharing.UnitsPerRank();
   progress.Finish();
   report.frames_read = mode == KeyframeMode::kAdaptive ? selector.Summary().frames_read
                                                        : report.frames_decoded;
@@ -247,6 +289,20 @@ ExtractReport ExtractFeatures(const std::filesystem::path& input, Database& data
   report.num_cameras = static_cast<int>(database.NumCameras());
   report.seconds = timer.ElapsedSeconds();
   return report;
+}
+
+nlohmann::json ToJson(const ExtractReport& r) {
+  return {{"frames_read", r.frames_read},
+          {"frames_blurred", r.frames_blurred},
+          {"frames_decoded", r.frames_decoded},
+          {"frames_extracted", r.frames_extracted},
+          {"frames_resumed", r.frames_resumed},
+          {"unreadable_images", r.unreadable_images},
+          {"num_cameras", r.num_cameras},
+          {"num_features", r.num_features},
+          {"seconds", r.seconds},
+          {"decode_seconds", r.decode_seconds},
+          {"frames_per_rank", r.frames_per_rank}};
 }
 
 }  // namespace loopsfm

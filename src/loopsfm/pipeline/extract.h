@@ -1,7 +1,8 @@
 #pragma once
 // The frames + features stage: decode a video or image folder, keep keyframes, extract SIFT
-// in parallel and store frames, cameras and features in the database. Frames are streamed
-// through a bounded pipeline, so memory does not grow with the number of frames. Frames
+// in parallel (on this process's threads and on the other ranks of an MPI run) and store
+// frames, cameras and features in the database, in frame order. Frames are streamed through
+// a bounded window, so memory does not grow with the number of frames. Frames
 // already stored with features are skipped, so an interrupted run resumes.
 
 #include <filesystem>
@@ -9,7 +10,10 @@
 #include <optional>
 #include <vector>
 
+#include <nlohmann/json.hpp>
+
 #include "loopsfm/feature/sift.h"
+#include "loopsfm/pipeline/work_sharing.h"
 #include "loopsfm/scene/camera.h"
 #include "loopsfm/storage/database.h"
 #include "loopsfm/video/keyframes.h"
@@ -27,6 +31,8 @@ struct ExtractOptions {
   CameraModelId camera_model = CameraModelId::kSimpleRadial;
   // Worker threads for feature extraction (0: all cores).
   int num_threads = 0;
+  // The ranks of an MPI run to share the frames with (null: this process alone).
+  WorkSharing* sharing = nullptr;
   // Show progress on stderr.
   bool show_progress = true;
   void Check() const;
@@ -42,6 +48,10 @@ struct ExtractReport {
   int num_cameras = 0;
   size_t num_features = 0;     // over the frames extracted now
   double seconds = 0.0;
+  // Of which decoding and choosing keyframes (one thread, on rank 0 of an MPI run).
+  double decode_seconds = 0.0;
+  // Frames extracted by each rank of an MPI run (rank 0 first; one entry in one process).
+  std::vector<size_t> frames_per_rank;
   double FeaturesPerFrame() const {
     return frames_extracted ? double(num_features) / frames_extracted : 0.0;
   }
@@ -50,6 +60,12 @@ struct ExtractReport {
 
 ExtractReport ExtractFeatures(const std::filesystem::path& input, Database& database,
                               const ExtractOptions& options);
+
+// The report as JSON (for benchmarks and scripts).
+nlohmann::json ToJson(const ExtractReport& report);
+
+// A worker rank's part of ExtractFeatures: SIFT on the frames rank 0 sends.
+WorkHandler SiftWorkHandler();
 
 // Extracts the frames of `input` at the given source indices (frames between keyframes) and
 // stores them as fill-ins (KeyframeReason::kFillIn), with the cameras and SIFT options of

@@ -7,6 +7,8 @@
 #include <type_traits>
 #include <utility>
 
+#include "loopsfm/pipeline/wire_format.h"
+#include "loopsfm/util/byte_io.h"
 #include "loopsfm/util/errors.h"
 #include "loopsfm/util/logging.h"
 
@@ -101,134 +103,6 @@ nlohmann::json OptionsJson(const IncrementalMapperOptions& o) {
 
 // ---- binary models -------------------------------------------------------------------
 
-class Writer {
- public:
-  explicit Writer(std::ofstream& out) : out_(out) {}
-  template <typename T>
-  void Put(const T& value) {
-    static_assert(std::is_trivially_copyable_v<T>);
-    out_.write(reinterpret_cast<const char*>(&value), sizeof(T));
-  }
-  void PutBytes(const void* data, size_t size) {
-    out_.write(static_cast<const char*>(data), static_cast<std::streamsize>(size));
-  }
-
- private:
-  std::ofstream& out_;
-};
-
-// Reads from a buffer, throwing InputError instead of reading past its end.
-class Reader {
- public:
-  Reader(const std::string& bytes, size_t offset) : bytes_(bytes), offset_(offset) {}
-  template <typename T>
-  T Get() {
-    static_assert(std::is_trivially_copyable_v<T>);
-    T value;
-    GetBytes(&value, sizeof(T));
-    return value;
-  }
-  void GetBytes(void* data, size_t size) {
-    if (size > bytes_.size() - offset_) throw InputError("it ends early");
-    // An empty vector's data() may be null, and memcpy from or to null is undefined even
-    // for 0 bytes (a camera saved without parameters).
-    if (size == 0) return;
-    std::memcpy(data, bytes_.data() + offset_, size);
-    offset_ += size;
-  }
-  // A count of items of `item_size` bytes each, checked against the bytes left.
-  uint64_t GetCount(size_t item_size) {
-    const uint64_t count = Get<uint64_t>();
-    if (count > (bytes_.size() - offset_) / std::max<size_t>(item_size, 1)) {
-      throw InputError(fmt::format("it claims {} items where {} bytes are left", count,
-                                   bytes_.size() - offset_));
-    }
-    return count;
-  }
-  size_t Offset() const { return offset_; }
-  bool AtEnd() const { return offset_ == bytes_.size(); }
-
- private:
-  const std::string& bytes_;
-  size_t offset_;
-};
-
-void PutPose(Writer& w, const Rigid3d& pose) {
-  w.PutBytes(pose.rotation.coeffs().data(), 4 * sizeof(double));
-  w.PutBytes(pose.translation.data(), 3 * sizeof(double));
-}
-
-Rigid3d GetPose(Reader& r) {
-  Rigid3d pose;
-  r.GetBytes(pose.rotation.coeffs().data(), 4 * sizeof(double));
-  r.GetBytes(pose.translation.data(), 3 * sizeof(double));
-  return pose;
-}
-
-void PutMappedState(Writer& w, const MappedState& state) {
-  w.Put<uint64_t>(state.cameras.size());
-  for (const Camera& camera : state.cameras) {
-    w.Put<uint32_t>(camera.camera_id);
-    w.Put<int32_t>(static_cast<int32_t>(camera.model_id));
-    w.Put<int32_t>(camera.width);
-    w.Put<int32_t>(camera.height);
-    w.Put<uint8_t>(camera.has_prior_focal_length ? 1 : 0);
-    w.Put<uint64_t>(camera.params.size());
-    w.PutBytes(camera.params.data(), camera.params.size() * sizeof(double));
-  }
-  w.Put<uint64_t>(state.registered.size());
-  for (const MappedState::RegisteredImage& image : state.registered) {
-    w.Put<uint32_t>(image.image_id);
-    PutPose(w, image.cam_from_world);
-  }
-  w.Put<uint64_t>(state.next_point3D_id);
-  w.Put<uint64_t>(state.points.size());
-  for (const MappedState::SavedPoint& point : state.points) {
-    w.Put<uint64_t>(point.point3D_id);
-    w.PutBytes(point.xyz.data(), 3 * sizeof(double));
-    w.PutBytes(point.color.data(), 3);
-    w.Put<double>(point.error);
-    w.Put<uint64_t>(point.track.size());
-    for (const TrackElement& el : point.track) {
-      w.Put<uint32_t>(el.image_id);
-      w.Put<uint32_t>(el.point2D_idx);
-    }
-  }
-}
-
-MappedState GetMappedState(Reader& r) {
-  MappedState state;
-  state.cameras.resize(r.GetCount(25));
-  for (Camera& camera : state.cameras) {
-    camera.camera_id = r.Get<uint32_t>();
-    camera.model_id = static_cast<CameraModelId>(r.Get<int32_t>());
-    camera.width = r.Get<int32_t>();
-    camera.height = r.Get<int32_t>();
-    camera.has_prior_focal_length = r.Get<uint8_t>() != 0;
-    camera.params.resize(r.GetCount(sizeof(double)));
-    r.GetBytes(camera.params.data(), camera.params.size() * sizeof(double));
-  }
-  state.registered.resize(r.GetCount(4 + 7 * sizeof(double)));
-  for (MappedState::RegisteredImage& image : state.registered) {
-    image.image_id = r.Get<uint32_t>();
-    image.cam_from_world = GetPose(r);
-  }
-  state.next_point3D_id = r.Get<uint64_t>();
-  state.points.resize(r.GetCount(8 + 3 * sizeof(double) + 3 + sizeof(double) + 8));
-  for (MappedState::SavedPoint& point : state.points) {
-    point.point3D_id = r.Get<uint64_t>();
-    r.GetBytes(point.xyz.data(), 3 * sizeof(double));
-    r.GetBytes(point.color.data(), 3);
-    point.error = r.Get<double>();
-    point.track.resize(r.GetCount(8));
-    for (TrackElement& el : point.track) {
-      el.image_id = r.Get<uint32_t>();
-      el.point2D_idx = r.Get<uint32_t>();
-    }
-  }
-  return state;
-}
-
 // ---- JSON header ---------------------------------------------------------------------
 
 // A whole number of type T. nlohmann's get<T>() converts any number unchecked: a float past
@@ -273,7 +147,9 @@ Rigid3d PoseFromJson(const nlohmann::json& j) {
   return pose;
 }
 
-nlohmann::json ReportJson(const MapperReport& r) {
+}  // namespace
+
+nlohmann::json MapperReportJson(const MapperReport& r) {
   nlohmann::json loops = nlohmann::json::array();
   for (const ClosedLoop& l : r.loops_closed) {
     loops.push_back({l.recent_frame, l.old_frame, l.num_correspondences, l.num_inliers,
@@ -314,7 +190,7 @@ nlohmann::json ReportJson(const MapperReport& r) {
   };
 }
 
-MapperReport ReportFromJson(const nlohmann::json& j) {
+MapperReport MapperReportFromJson(const nlohmann::json& j) {
   MapperReport r;
   const nlohmann::json& c = j.at("counts");
   if (c.size() != 21) throw InputError("the report's counts are not 21 numbers");
@@ -363,6 +239,8 @@ MapperReport ReportFromJson(const nlohmann::json& j) {
   return r;
 }
 
+namespace {
+
 nlohmann::json ModelJson(const MapperCheckpoint::Model& model) {
   return {{"gauge", {model.gauge1, model.gauge2}}, {"merge_failures", model.merge_failures}};
 }
@@ -395,7 +273,7 @@ nlohmann::json HeaderJson(const MapperCheckpoint& c, const nlohmann::json& finge
       {"loop_random_state", c.loop_random_state},
       {"loop_window", c.loop_window},
       {"loop_cooldown", c.loop_cooldown},
-      {"report", ReportJson(c.report)},
+      {"report", MapperReportJson(c.report)},
   };
 }
 
@@ -418,7 +296,7 @@ MapperCheckpoint CheckpointFromHeader(const nlohmann::json& j) {
   c.loop_random_state = j.at("loop_random_state").get<std::string>();
   c.loop_window = GetInts<image_t>(j.at("loop_window"));
   c.loop_cooldown = GetInt<int>(j.at("loop_cooldown"));
-  c.report = ReportFromJson(j.at("report"));
+  c.report = MapperReportFromJson(j.at("report"));
   return c;
 }
 
@@ -427,14 +305,12 @@ MapperCheckpoint ParseCheckpoint(const std::string& bytes, const nlohmann::json&
                                  bool* other_fingerprint) {
   const size_t magic_size = sizeof(kMagic) - 1;
   if (bytes.compare(0, magic_size, kMagic) != 0) throw InputError("it is not a checkpoint");
-  Reader reader(bytes, magic_size);
+  ByteReader reader(bytes, magic_size);
   const uint32_t version = reader.Get<uint32_t>();
   if (version != kVersion) {
     throw InputError(fmt::format("it has version {}, this loopsfm writes {}", version, kVersion));
   }
-  std::string header(reader.GetCount(1), '\0');
-  reader.GetBytes(header.data(), header.size());
-  const nlohmann::json j = nlohmann::json::parse(header);
+  const nlohmann::json j = nlohmann::json::parse(reader.GetString());
   if (j.at("fingerprint") != fingerprint) {
     *other_fingerprint = true;
     return {};
@@ -462,14 +338,13 @@ void WriteMapperCheckpoint(const fs::path& path, const MapperCheckpoint& checkpo
       throw StorageError(fmt::format("cannot write the mapping checkpoint '{}': check that the "
                                      "folder is writable", partial.string()));
     }
-    Writer writer(out);
+    ByteWriter writer;
     writer.PutBytes(kMagic, sizeof(kMagic) - 1);
     writer.Put<uint32_t>(kVersion);
-    const std::string header = HeaderJson(checkpoint, fingerprint).dump();
-    writer.Put<uint64_t>(header.size());
-    writer.PutBytes(header.data(), header.size());
+    writer.PutString(HeaderJson(checkpoint, fingerprint).dump());
     for (const MapperCheckpoint::Model& model : checkpoint.kept) PutMappedState(writer, model.state);
     if (checkpoint.growing) PutMappedState(writer, checkpoint.growing->state);
+    out.write(writer.Bytes().data(), static_cast<std::streamsize>(writer.Bytes().size()));
     out.close();
     if (!out) {
       throw StorageError(fmt::format("writing the mapping checkpoint '{}' failed (disk full?)",

@@ -24,6 +24,11 @@
 
 namespace loopsfm {
 
+// The mapper's report as JSON and back (checkpoints, segments mapped on other ranks);
+// FromJson throws InputError or a JSON error for text that is not one.
+nlohmann::json MapperReportJson(const MapperReport& report);
+MapperReport MapperReportFromJson(const nlohmann::json& json);
+
 nlohmann::json MapperCheckpointFingerprint(const MapperInput& input,
                                            const IncrementalMapperOptions& options);
 

@@ -2,12 +2,13 @@
 #include "loopsfm/pipeline/fingerprint.h"
 
 #include <algorithm>
+#include <array>
+#include <memory>
+#include <set>
 #include <map>
 #include <unordered_set>
 
-#include <tbb/global_control.h>
-#include <tbb/parallel_for.h>
-
+#include "loopsfm/pipeline/wire_format.h"
 #include "loopsfm/util/errors.h"
 #include "loopsfm/util/progress.h"
 #include "loopsfm/util/timer.h"
@@ -73,12 +74,115 @@ struct PairResult {
   double verify_ms = 0.0;
 };
 
+// Matches and verifies one pair; `random` is the pair's own stream, so the result does not
+// depend on which thread or rank computes it.
+PairResult MatchPair(const Camera& camera1, const FeatureSet& features1, const Camera& camera2,
+                     const FeatureSet& features2, const DescriptorMatchingOptions& matcher,
+                     const TwoViewVerificationOptions& verification, Random random) {
+  PairResult result;
+  Timer timer;
+  result.matches = MatchDescriptors(features1.descriptors, features2.descriptors, matcher);
+  result.match_ms = timer.ElapsedMillis();
+  timer.Restart();
+  result.verification = VerifyTwoViewGeometry(camera1, features1.keypoints, camera2,
+                                              features2.keypoints, result.matches, verification,
+                                              random);
+  result.verify_ms = timer.ElapsedMillis();
+  return result;
+}
+
+// Pairs per unit of work: enough to be worth a message, few enough to balance.
+constexpr size_t kPairsPerUnit = 4;
+
+// A frame's camera and features, as a worker rank holds them between requests.
+struct HeldFrame {
+  Camera camera;
+  FeatureSet features;
+};
+
 }  // namespace
 
 PairMatcher::PairMatcher(Database& database, const MatchOptions& options)
     : database_(database), options_(options), random_(options.seed) {
   for (const Frame& frame : database.ReadFrames()) camera_of_[frame.image_id] = frame.camera_id;
   for (const Camera& camera : database.ReadCameras()) cameras_[camera.camera_id] = camera;
+}
+
+const Camera& PairMatcher::CameraOf(image_t image_id) const {
+  return cameras_.at(camera_of_.at(image_id));
+}
+
+void PairMatcher::PutMatchRequest(ByteWriter& request, int rank,
+                                  const std::unordered_set<image_t>& batch,
+                                  const std::vector<ImagePair>& pairs) {
+  // What the rank holds, as this matcher last told it: on the first request, nothing (it
+  // forgets what an earlier matcher sent); frames of earlier batches are dropped.
+  const bool first = !held_[rank].has_value();
+  std::set<image_t>& held = first ? held_[rank].emplace() : *held_[rank];
+  request.Put<uint8_t>(first ? 1 : 0);
+  std::vector<image_t> drop;
+  for (image_t id : held) {
+    if (!batch.count(id)) drop.push_back(id);
+  }
+  for (image_t id : drop) held.erase(id);
+  request.PutVector(drop);
+  std::vector<image_t> send;
+  for (const ImagePair& pair : pairs) {
+    for (image_t id : {pair.image_id1, pair.image_id2}) {
+      if (held.insert(id).second) send.push_back(id);
+    }
+  }
+  request.Put<uint64_t>(send.size());
+  for (image_t id : send) {
+    request.Put<image_t>(id);
+    PutCamera(request, CameraOf(id));
+    PutFeatures(request, cache_.at(id));
+  }
+  request.Put(options_.matcher);
+  request.Put(options_.verification);
+  request.Put<uint64_t>(random_.Seed());
+  request.PutVector(pairs);
+}
+
+WorkHandler MatchWorkHandler() {
+  auto held = std::make_shared<std::unordered_map<image_t, std::shared_ptr<const HeldFrame>>>();
+  return [held](ByteReader& request) {
+    if (request.Get<uint8_t>()) held->clear();
+    for (image_t id : request.GetVector<image_t>()) held->erase(id);
+    const uint64_t num_sent = request.Get<uint64_t>();
+    for (uint64_t n = 0; n < num_sent; ++n) {
+      const auto id = request.Get<image_t>();
+      auto frame = std::make_shared<HeldFrame>();
+      frame->camera = GetCamera(request);
+      frame->features = GetFeatures(request);
+      (*held)[id] = std::move(frame);
+    }
+    const auto matcher = request.Get<DescriptorMatchingOptions>();
+    const auto verification = request.Get<TwoViewVerificationOptions>();
+    const Random random(request.Get<uint64_t>());
+    // The frames this unit needs, held by the computation (a later request may drop them).
+    std::vector<std::pair<ImagePair, std::array<std::shared_ptr<const HeldFrame>, 2>>> work;
+    for (const ImagePair& pair : request.GetVector<ImagePair>()) {
+      auto frame = [&](image_t id) {
+        auto it = held->find(id);
+        if (it == held->end()) throw Error(fmt::format("frame {} was not sent", id));
+        return it->second;
+      };
+      work.push_back({pair, {frame(pair.image_id1), frame(pair.image_id2)}});
+    }
+    return [work = std::move(work), matcher, verification, random](ByteWriter& result) {
+      for (const auto& [pair, frames] : work) {
+        const PairResult r =
+            MatchPair(frames[0]->camera, frames[0]->features, frames[1]->camera,
+                      frames[1]->features, matcher, verification,
+                      random.Derive(PairToPairId(pair)));
+        result.PutVector(r.matches);
+        PutGeometry(result, r.verification.geometry);
+        result.Put(r.match_ms);
+        result.Put(r.verify_ms);
+      }
+    };
+  };
 }
 
 std::vector<bool> PairMatcher::Match(const std::vector<ImagePair>& all_pairs, MatchReport* report) {
@@ -96,14 +200,15 @@ std::vector<bool> PairMatcher::Match(const std::vector<ImagePair>& all_pairs, Ma
     }
   }
   report->num_pairs += all_pairs.size();
-  const int threads = options_.num_threads > 0
-                          ? options_.num_threads
-                          : static_cast<int>(std::thread::hardware_concurrency());
-  tbb::global_control limit(tbb::global_control::max_allowed_parallelism, std::max(1, threads));
+  std::optional<WorkSharing> own_sharing;
+  WorkSharing& sharing = options_.sharing ? *options_.sharing
+                                          : own_sharing.emplace(nullptr, options_.num_threads);
+  if (held_.size() != size_t(sharing.NumRanks())) held_.assign(sharing.NumRanks(), std::nullopt);
   Progress progress("match", todo.size(), options_.show_progress && !todo.empty());
+  const size_t batch_size = size_t(options_.batch_size) * sharing.NumRanks();
 
-  for (size_t begin = 0; begin < todo.size(); begin += options_.batch_size) {
-    const size_t end = std::min(todo.size(), begin + options_.batch_size);
+  for (size_t begin = 0; begin < todo.size(); begin += batch_size) {
+    const size_t end = std::min(todo.size(), begin + batch_size);
     // Load the features this batch needs; drop the ones it does not.
     Timer load_timer;
     std::unordered_set<image_t> needed;
@@ -120,24 +225,57 @@ std::vector<bool> PairMatcher::Match(const std::vector<ImagePair>& all_pairs, Ma
     report->load_seconds += load_timer.ElapsedSeconds();
 
     std::vector<PairResult> results(end - begin);
-    tbb::parallel_for(size_t{0}, end - begin, [&](size_t k) {
-      const ImagePair& pair = all_pairs[todo[begin + k]];
-      const FeatureSet& f1 = cache_.at(pair.image_id1);
-      const FeatureSet& f2 = cache_.at(pair.image_id2);
-      PairResult& result = results[k];
-      Timer pair_timer;
-      result.matches = MatchDescriptors(f1.descriptors, f2.descriptors, options_.matcher);
-      result.match_ms = pair_timer.ElapsedMillis();
-      pair_timer.Restart();
-      Random pair_random = random_.Derive(PairToPairId(pair));
-      result.verification = VerifyTwoViewGeometry(
-          cameras_.at(camera_of_.at(pair.image_id1)), f1.keypoints,
-          cameras_.at(camera_of_.at(pair.image_id2)), f2.keypoints, result.matches,
-          options_.verification, pair_random);
-      result.verify_ms = pair_timer.ElapsedMillis();
-      progress.Advance();
-    });
+    const size_t num_units = (end - begin + kPairsPerUnit - 1) / kPairsPerUnit;
+    auto pairs_of = [&](size_t unit) {
+      const size_t first = unit * kPairsPerUnit;
+      return std::make_pair(first, std::min(end - begin, first + kPairsPerUnit));
+    };
+    int last_unit_rank = 0;  // who computed the last unit, which may be short
+    WorkSharing::Job job;
+    job.kind = WorkKind::kMatchPairs;
+    job.next = [&](size_t unit) { return unit < num_units; };
+    job.compute = [&](size_t unit) {
+      const auto [first, last] = pairs_of(unit);
+      for (size_t k = first; k < last; ++k) {
+        const ImagePair& pair = all_pairs[todo[begin + k]];
+        results[k] = MatchPair(CameraOf(pair.image_id1), cache_.at(pair.image_id1),
+                               CameraOf(pair.image_id2), cache_.at(pair.image_id2),
+                               options_.matcher, options_.verification,
+                               random_.Derive(PairToPairId(pair)));
+      }
+    };
+    job.request = [&](size_t unit, int rank, ByteWriter& request) {
+      const auto [first, last] = pairs_of(unit);
+      std::vector<ImagePair> pairs;
+      for (size_t k = first; k < last; ++k) pairs.push_back(all_pairs[todo[begin + k]]);
+      PutMatchRequest(request, rank, needed, pairs);
+    };
+    job.take_result = [&](size_t unit, int rank, ByteReader& result) {
+      if (unit + 1 == num_units) last_unit_rank = rank;
+      const auto [first, last] = pairs_of(unit);
+      for (size_t k = first; k < last; ++k) {
+        PairResult& pair_result = results[k];
+        pair_result.matches = result.GetVector<FeatureMatch>();
+        pair_result.verification.geometry = GetGeometry(result);
+        pair_result.match_ms = result.Get<double>();
+        pair_result.verify_ms = result.Get<double>();
+      }
+    };
+    job.finish = [&](size_t unit) {
+      const auto [first, last] = pairs_of(unit);
+      for (size_t k = first; k < last; ++k) progress.Advance();
+    };
+    sharing.Run(job);
+    const std::vector<size_t>& units = sharing.UnitsPerRank();
+    report->pairs_per_rank.resize(std::max(report->pairs_per_rank.size(), units.size()), 0);
+    for (size_t rank = 0; rank < units.size(); ++rank) {
+      report->pairs_per_rank[rank] += units[rank] * kPairsPerUnit;
+    }
+    if (const size_t short_by = num_units * kPairsPerUnit - (end - begin); short_by > 0) {
+      report->pairs_per_rank[last_unit_rank] -= short_by;
+    }
 
+    Timer store_timer;
     Database::Transaction transaction(database_);
     for (size_t k = 0; k < results.size(); ++k) {
       const ImagePair& pair = all_pairs[todo[begin + k]];
@@ -155,6 +293,7 @@ std::vector<bool> PairMatcher::Match(const std::vector<ImagePair>& all_pairs, Ma
       verify_ms_.push_back(result.verify_ms);
     }
     transaction.Commit();
+    report->store_seconds += store_timer.ElapsedSeconds();
   }
   progress.Finish();
   report->median_match_ms = Median(match_ms_);
@@ -208,6 +347,8 @@ nlohmann::json ToJson(const MatchReport& r) {
           {"num_inliers", r.num_inliers},
           {"seconds", r.seconds},
           {"load_seconds", r.load_seconds},
+          {"store_seconds", r.store_seconds},
+          {"pairs_per_rank", r.pairs_per_rank},
           {"median_match_ms", r.median_match_ms},
           {"median_verify_ms", r.median_verify_ms},
           {"kernel", r.kernel},

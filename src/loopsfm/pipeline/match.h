@@ -9,7 +9,10 @@
 
 #include <filesystem>
 #include <map>
+#include <optional>
+#include <set>
 #include <unordered_map>
+#include <unordered_set>
 
 #include <nlohmann/json.hpp>
 
@@ -20,6 +23,7 @@
 #include "loopsfm/matching/pair_selection.h"
 #include "loopsfm/matching/sequential_waves.h"
 #include "loopsfm/matching/view_graph_bridging.h"
+#include "loopsfm/pipeline/work_sharing.h"
 #include "loopsfm/storage/database.h"
 #include "loopsfm/tracks/track_builder.h"
 
@@ -70,8 +74,10 @@ struct MatchOptions {
   std::filesystem::path similarity_path;
   // Worker threads (0: all cores).
   int num_threads = 0;
-  // Pairs processed per batch (bounds the descriptors held in memory).
+  // Pairs processed per batch, per rank (bounds the descriptors held in memory).
   int batch_size = 256;
+  // The ranks of an MPI run to share the pairs with (null: this process alone).
+  WorkSharing* sharing = nullptr;
   // Seed of the verification RANSAC (each pair derives its own stream).
   uint64_t seed = kDefaultRandomSeed;
   // Show progress on stderr.
@@ -99,6 +105,10 @@ struct MatchReport {
   size_t num_inliers = 0;
   double seconds = 0.0;
   double load_seconds = 0.0;
+  // Writing the results (on rank 0 of an MPI run).
+  double store_seconds = 0.0;
+  // Pairs matched by each rank of an MPI run (rank 0 first; one entry in one process).
+  std::vector<size_t> pairs_per_rank;
   // Per matched pair: descriptor matching time (median, ms) and verification time.
   double median_match_ms = 0.0;
   double median_verify_ms = 0.0;
@@ -125,14 +135,24 @@ class PairMatcher {
   std::vector<bool> Match(const std::vector<ImagePair>& pairs, MatchReport* report);
 
  private:
+  const Camera& CameraOf(image_t image_id) const;
+  // A request for another rank to match `pairs` of the batch that needs the frames `batch`.
+  void PutMatchRequest(ByteWriter& request, int rank, const std::unordered_set<image_t>& batch,
+                       const std::vector<ImagePair>& pairs);
+
   Database& database_;
   const MatchOptions& options_;
   Random random_;
   std::unordered_map<image_t, camera_t> camera_of_;
   std::unordered_map<camera_t, Camera> cameras_;
   std::map<image_t, FeatureSet> cache_;
+  // Per rank: the frames it holds from this matcher (nullopt before the first request).
+  std::vector<std::optional<std::set<image_t>>> held_;
   std::vector<double> match_ms_, verify_ms_;
 };
+
+// A worker rank's part of PairMatcher: matching and verifying the pairs rank 0 sends.
+WorkHandler MatchWorkHandler();
 
 // The lowres strategy over all pairs; pairs the prefilter rejects are recorded as tried
 // with no matches (an empty matches row), so a resumed run skips them.

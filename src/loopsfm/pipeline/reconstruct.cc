@@ -195,7 +195,6 @@ void FillInGaps(const fs::path& input, Database& database, const ReconstructOpti
 
 namespace {
 
-// The global mapper on the mapper input; its stages' times go to the report's stage times.
 // The incremental mapper on segments; with checkpoints, each segment's in
 // OUT/segments/segment_K.bin.
 std::vector<Reconstruction> MapSegmented(const MapperInput& mapper_input,
@@ -269,6 +268,7 @@ ReconstructReport Reconstruct(const fs::path& input, const fs::path& output_dir,
   report.num_frames = database.NumFrames();
   spdlog::info("extract: {} frames ({} new), {:.0f} features/frame", report.num_frames,
                report.extract.frames_extracted, report.extract.FeaturesPerFrame());
+  LogRankShares("extract: frames", report.extract.frames_per_rank);
   if (report.num_frames < 2) {
     throw InputError(fmt::format(
         "'{}' gave {} frame{}: a reconstruction needs at least two, taken while the camera "
@@ -285,6 +285,7 @@ ReconstructReport Reconstruct(const fs::path& input, const fs::path& output_dir,
                report.match.num_pairs, report.match.num_pairs_matched,
                report.match.num_pairs_resumed, report.match.num_pairs_verified,
                report.match.MeanInliers());
+  LogRankShares("match: pairs", report.match.pairs_per_rank);
 
   if (options.fill_in_rounds > 0 && database.ReadMeta("keyframes")) {
     stage.Restart();

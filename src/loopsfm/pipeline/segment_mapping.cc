@@ -9,6 +9,7 @@
 
 #include "loopsfm/loop/loop_closing.h"
 #include "loopsfm/pipeline/mapper_checkpoint.h"
+#include "loopsfm/pipeline/wire_format.h"
 #include "loopsfm/sfm/incremental_mapper.h"
 #include "loopsfm/sfm/mapper_state.h"
 #include "loopsfm/sfm/model_merger.h"
@@ -62,16 +63,12 @@ struct SegmentResult {
   SegmentReport report;
 };
 
-// Maps frames [begin, end) of the input; with a checkpoint path, saves the mapping state
-// there now and then, and goes on from what is there.
-SegmentResult MapSegment(const MapperInput& input, const IncrementalMapperOptions& options,
-                         size_t begin, size_t end, const fs::path& checkpoint_path,
-                         double checkpoint_interval_seconds) {
+// Maps a part of the input (a segment's frames); with a checkpoint path, saves the mapping
+// state there now and then, and goes on from what is there.
+SegmentResult MapPart(const MapperInput& part, const IncrementalMapperOptions& options,
+                      const fs::path& checkpoint_path, double checkpoint_interval_seconds) {
   Timer timer;
   SegmentResult result;
-  result.report.first_frame = static_cast<int>(begin);
-  result.report.num_frames = static_cast<int>(end - begin);
-  const MapperInput part = InputPart(input, begin, end);
   std::optional<MapperCheckpointFile> checkpoint;
   if (!checkpoint_path.empty()) {
     checkpoint.emplace(checkpoint_path, part, options, checkpoint_interval_seconds);
@@ -87,14 +84,30 @@ SegmentResult MapSegment(const MapperInput& input, const IncrementalMapperOption
     result.model = std::move(models[0]);
   }
   result.report.seconds = timer.ElapsedSeconds();
-  spdlog::info("segment of frames {}-{}: {} registered in its largest model of {}, {:.1f} s{}",
-               begin, end - 1, result.report.num_registered, result.report.num_models,
-               result.report.seconds, result.report.resumed ? " (from its checkpoint)" : "");
   return result;
 }
 
-// Stage 1: every segment mapped, num_parallel at a time, each with its share of the threads.
-// An exception in one segment is thrown again once all have finished.
+// What a rank that maps a segment sends back: its report, the mapper's, its largest model.
+void PutSegmentResult(ByteWriter& w, const SegmentResult& result) {
+  w.Put(result.report);
+  w.PutString(MapperReportJson(result.mapper_report).dump());
+  w.Put<uint8_t>(result.model ? 1 : 0);
+  if (result.model) PutMappedState(w, result.model->SaveMapped());
+}
+
+SegmentResult GetSegmentResult(ByteReader& r, const MapperInput& part) {
+  SegmentResult result;
+  result.report = r.Get<SegmentReport>();
+  result.mapper_report = MapperReportFromJson(nlohmann::json::parse(r.GetString()));
+  if (r.Get<uint8_t>()) {
+    result.model = EmptyReconstruction(part);
+    result.model->RestoreMapped(GetMappedState(r));
+  }
+  return result;
+}
+
+// Stage 1: every segment mapped, as many at once as the ranks' threads allow (each segment
+// with its share of the mapper's threads), here and on the other ranks of an MPI run.
 std::vector<SegmentResult> MapSegments(const MapperInput& input,
                                        const IncrementalMapperOptions& mapper_options,
                                        const SegmentMappingOptions& options,
@@ -106,38 +119,61 @@ std::vector<SegmentResult> MapSegments(const MapperInput& input,
                                 options.num_parallel > 0 ? options.num_parallel : threads);
   IncrementalMapperOptions segment_options = mapper_options;
   segment_options.num_threads = std::max(1, threads / std::max(parallel, 1));
-  std::vector<SegmentResult> results(plan.size());
-  std::vector<std::exception_ptr> errors(plan.size());
+  fs::path checkpoint_dir;
   if (!options.checkpoint_dir.empty()) {
+    // Absolute, for the ranks that write their segments' checkpoints there too.
+    checkpoint_dir = fs::absolute(options.checkpoint_dir);
     std::error_code ec;
-    fs::create_directories(options.checkpoint_dir, ec);
+    fs::create_directories(checkpoint_dir, ec);
     if (ec) {
       throw StorageError(fmt::format("cannot create the segment checkpoint folder '{}': {}",
-                                     options.checkpoint_dir.string(), ec.message()));
+                                     checkpoint_dir.string(), ec.message()));
     }
   }
-  std::atomic<size_t> next{0};
-  auto work = [&] {
-    for (size_t k = next++; k < plan.size(); k = next++) {
-      try {
-        const fs::path checkpoint =
-            options.checkpoint_dir.empty()
-                ? fs::path()
-                : options.checkpoint_dir / fmt::format("segment_{}.bin", k);
-        results[k] = MapSegment(input, segment_options, plan[k].first, plan[k].second,
-                                checkpoint, options.checkpoint_interval_seconds);
-      } catch (...) {
-        errors[k] = std::current_exception();
-      }
-    }
+  auto checkpoint_of = [&](size_t k) {
+    return checkpoint_dir.empty() ? fs::path()
+                                  : checkpoint_dir / fmt::format("segment_{}.bin", k);
   };
-  std::vector<std::thread> workers;
-  for (int t = 1; t < parallel; ++t) workers.emplace_back(work);
-  work();
-  for (std::thread& worker : workers) worker.join();
-  for (const std::exception_ptr& error : errors) {
-    if (error) std::rethrow_exception(error);
+  auto part_of = [&](size_t k) { return InputPart(input, plan[k].first, plan[k].second); };
+
+  std::vector<SegmentResult> results(plan.size());
+  std::optional<WorkSharing> own_sharing;
+  WorkSharing::Job job;
+  job.kind = WorkKind::kMapSegment;
+  if (options.sharing && options.sharing->NumRanks() > 1) {
+    // Each rank maps its share of the segments at once, on its threads.
+    const int num_ranks = options.sharing->NumRanks();
+    const int per_rank = (static_cast<int>(plan.size()) + num_ranks - 1) / num_ranks;
+    segment_options.num_threads = std::max(1, options.sharing->NumThreads() / per_rank);
+    job.threads_per_unit = segment_options.num_threads;
+  } else {
+    own_sharing.emplace(nullptr, parallel);
   }
+  WorkSharing& sharing = own_sharing ? *own_sharing : *options.sharing;
+  job.next = [&](size_t k) { return k < plan.size(); };
+  job.compute = [&](size_t k) {
+    results[k] = MapPart(part_of(k), segment_options, checkpoint_of(k),
+                         options.checkpoint_interval_seconds);
+  };
+  job.request = [&](size_t k, int, ByteWriter& request) {
+    request.Put(segment_options);
+    request.PutString(checkpoint_of(k).string());
+    request.Put(options.checkpoint_interval_seconds);
+    PutMapperInput(request, part_of(k));
+  };
+  job.take_result = [&](size_t k, int, ByteReader& result) {
+    results[k] = GetSegmentResult(result, part_of(k));
+  };
+  job.finish = [&](size_t k) {
+    SegmentReport& report = results[k].report;
+    report.first_frame = static_cast<int>(plan[k].first);
+    report.num_frames = static_cast<int>(plan[k].second - plan[k].first);
+    spdlog::info("segment of frames {}-{}: {} registered in its largest model of {}, {:.1f} s{}",
+                 plan[k].first, plan[k].second - 1, report.num_registered, report.num_models,
+                 report.seconds, report.resumed ? " (from its checkpoint)" : "");
+  };
+  sharing.Run(job);
+  LogRankShares("segments: segments", sharing.UnitsPerRank());
   return results;
 }
 
@@ -174,6 +210,24 @@ std::vector<Reconstruction> MergeSegments(const MapperInput& chain,
 }
 
 }  // namespace
+
+WorkHandler SegmentWorkHandler() {
+  return [](ByteReader& request) {
+    const auto options = request.Get<IncrementalMapperOptions>();
+    const fs::path checkpoint = request.GetString();
+    const auto checkpoint_interval_seconds = request.Get<double>();
+    auto part = std::make_shared<const MapperInput>(GetMapperInput(request));
+    return [options, checkpoint, checkpoint_interval_seconds, part](ByteWriter& result) {
+      // On another machine the folder may not be there yet (no shared file system: the
+      // checkpoint then stays on this machine, and a rerun maps the segment again).
+      if (!checkpoint.empty()) {
+        std::error_code ignored;  // MapperCheckpointFile says what is wrong if it is needed
+        fs::create_directories(checkpoint.parent_path(), ignored);
+      }
+      PutSegmentResult(result, MapPart(*part, options, checkpoint, checkpoint_interval_seconds));
+    };
+  };
+}
 
 std::vector<Reconstruction> MapInSegments(const MapperInput& input,
                                           const IncrementalMapperOptions& mapper_options,

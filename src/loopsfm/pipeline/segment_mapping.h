@@ -22,6 +22,7 @@
 #include <utility>
 #include <vector>
 
+#include "loopsfm/pipeline/work_sharing.h"
 #include "loopsfm/scene/reconstruction.h"
 #include "loopsfm/sfm/mapper_input.h"
 #include "loopsfm/sfm/mapper_options.h"
@@ -44,6 +45,9 @@ struct SegmentMappingOptions {
   // from there: a finished segment is not mapped again. Empty: no checkpoints.
   std::filesystem::path checkpoint_dir;
   double checkpoint_interval_seconds = 60.0;
+  // The ranks of an MPI run to share the segments with (null: this process alone). The
+  // checkpoint folder must then be one they all reach (a shared file system).
+  WorkSharing* sharing = nullptr;
   void Check() const;  // throws InvalidArgument
 };
 
@@ -79,6 +83,9 @@ struct SegmentMappingReport {
 // The segments, as [begin, end) capture indices: num_segments of equal length (to one frame)
 // that share `overlap` frames with the next, covering the frames. Fewer when a segment would
 // have fewer than 2 * overlap frames (the log says so); one for num_segments 1.
+// A worker rank's part of MapInSegments: mapping the segments rank 0 sends.
+WorkHandler SegmentWorkHandler();
+
 std::vector<std::pair<size_t, size_t>> PlanSegments(size_t num_frames, int num_segments,
                                                     int overlap);
 

@@ -2,7 +2,12 @@
 
 #include <gtest/gtest.h>
 
+#include <thread>
+
+#include <tbb/global_control.h>
+
 #include "loopsfm/loop/loop_closing.h"
+#include "loopsfm/pipeline/work_sharing.h"
 #include "loopsfm/sfm/loop_test_problem.h"
 #include "loopsfm/sfm/sfm_test_problem.h"
 #include "loopsfm/util/errors.h"
@@ -73,9 +78,10 @@ TEST(SegmentMapping, ThreeSegmentsOfALoopWalkMergeIntoOneModel) {
   EXPECT_LT(error.max_rotation_deg, std::max(1.25 * whole_error.max_rotation_deg, 0.1));
 }
 
-// The same models whether the segments are mapped one at a time or all at once (each
-// segment's mapping depends only on its frames and the options).
-TEST(SegmentMapping, SegmentsMappedAtOnceGiveTheSameModel) {
+// The same models whether the segments are mapped one at a time, all at once, or on other
+// ranks (each segment's mapping depends only on its frames and the options; a model comes
+// back from another rank bit for bit).
+TEST(SegmentMapping, SegmentsMappedAtOnceOrOnOtherRanksGiveTheSameModel) {
   testing::MapperProblemOptions problem;
   problem.num_frames = 40;
   const testing::MapperProblem p = testing::MakeMapperProblem(problem);
@@ -88,13 +94,34 @@ TEST(SegmentMapping, SegmentsMappedAtOnceGiveTheSameModel) {
   options.num_parallel = 3;
   const std::vector<Reconstruction> at_once =
       MapInSegments(p.input, testing::LoopOptions(), options, nullptr, nullptr);
+
+  // Three ranks (threads here, as tests/e2e runs them under mpirun): one segment each.
+  tbb::global_control pool(tbb::global_control::max_allowed_parallelism, 8);
+  auto ranks = InProcessRanks(3);
+  std::vector<std::thread> workers;
+  for (int r = 1; r < 3; ++r) workers.emplace_back([&ranks, r] { ServeStageWork(*ranks[r], 1); });
+  std::vector<Reconstruction> on_ranks;
+  std::vector<size_t> segments_per_rank;
+  {
+    WorkSharing sharing(ranks[0].get(), 1);
+    options.sharing = &sharing;
+    on_ranks = MapInSegments(p.input, testing::LoopOptions(), options, nullptr, nullptr);
+    segments_per_rank = sharing.UnitsPerRank();
+  }
+  for (std::thread& worker : workers) worker.join();
+  EXPECT_EQ(segments_per_rank, (std::vector<size_t>{1, 1, 1}));
+
   ASSERT_EQ(one_at_a_time.size(), 1u);
-  ASSERT_EQ(at_once.size(), 1u);
   EXPECT_EQ(one_at_a_time[0].NumRegImages(), 40u);
-  for (const image_t id : one_at_a_time[0].RegImageIds()) {
-    ASSERT_TRUE(at_once[0].IsRegistered(id));
-    EXPECT_EQ(at_once[0].GetImage(id).cam_from_world.translation,
-              one_at_a_time[0].GetImage(id).cam_from_world.translation);
+  for (const std::vector<Reconstruction>* other : {&at_once, static_cast<const std::vector<Reconstruction>*>(&on_ranks)}) {
+    ASSERT_EQ(other->size(), 1u);
+    const Reconstruction& model = (*other)[0];
+    EXPECT_EQ(model.NumPoints3D(), one_at_a_time[0].NumPoints3D());
+    for (const image_t id : one_at_a_time[0].RegImageIds()) {
+      ASSERT_TRUE(model.IsRegistered(id));
+      EXPECT_EQ(model.GetImage(id).cam_from_world.translation,
+                one_at_a_time[0].GetImage(id).cam_from_world.translation);
+    }
   }
 }
 

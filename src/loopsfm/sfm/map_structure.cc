@@ -10,16 +10,8 @@
 namespace loopsfm {
 
 MapStructure::MapStructure(const MapperInput& input, const IncrementalMapperOptions& options)
-    : input_(input), options_(options) {
-  for (const Camera& camera : input.cameras) reconstruction_.AddCamera(camera);
+    : input_(input), options_(options), reconstruction_(EmptyReconstruction(input)) {
   for (const MapperFrame& frame : input.frames) {
-    Image image;
-    image.image_id = frame.image_id;
-    image.camera_id = frame.camera_id;
-    image.name = frame.name;
-    image.points2D.resize(frame.points2D.size());
-    for (size_t i = 0; i < frame.points2D.size(); ++i) image.points2D[i].xy = frame.points2D[i];
-    reconstruction_.AddImage(std::move(image));
     track_of_[frame.image_id].assign(frame.points2D.size(), -1);
   }
   for (size_t k = 0; k < input.frames.size(); ++k) {

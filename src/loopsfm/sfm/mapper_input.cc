@@ -8,6 +8,21 @@
 
 namespace loopsfm {
 
+Reconstruction EmptyReconstruction(const MapperInput& input) {
+  Reconstruction reconstruction;
+  for (const Camera& camera : input.cameras) reconstruction.AddCamera(camera);
+  for (const MapperFrame& frame : input.frames) {
+    Image image;
+    image.image_id = frame.image_id;
+    image.camera_id = frame.camera_id;
+    image.name = frame.name;
+    image.points2D.resize(frame.points2D.size());
+    for (size_t i = 0; i < frame.points2D.size(); ++i) image.points2D[i].xy = frame.points2D[i];
+    reconstruction.AddImage(std::move(image));
+  }
+  return reconstruction;
+}
+
 MapperInput InputPart(const MapperInput& input, size_t begin, size_t end, int max_frame_gap) {
   if (begin > end || end > input.frames.size()) {
     throw InvalidArgument(fmt::format("input part: frames [{}, {}) are not a part of the {} frames",

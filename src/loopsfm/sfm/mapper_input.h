@@ -11,6 +11,7 @@
 #include <Eigen/Core>
 
 #include "loopsfm/scene/camera.h"
+#include "loopsfm/scene/reconstruction.h"
 #include "loopsfm/scene/track.h"
 #include "loopsfm/scene/two_view_geometry.h"
 
@@ -45,5 +46,9 @@ struct MapperInput {
 // pairs. The cameras are all kept. InvalidArgument for a range outside the frames.
 MapperInput InputPart(const MapperInput& input, size_t begin, size_t end,
                       int max_frame_gap = INT_MAX);
+
+// A reconstruction of the input's cameras and frames, none registered, no points: where
+// mapping starts, and what a saved state (MappedState) is restored onto.
+Reconstruction EmptyReconstruction(const MapperInput& input);
 
 }  // namespace loopsfm
