@@ -90,6 +90,142 @@ class LocalThreads {
   std::atomic<int> running_{0};
 };
 
+// One job on rank 0: hands out units to the ranks (this one included) with room for them,
+// collects what they computed, and finishes units in order.
+class JobRun {
+ public:
+  JobRun(const WorkSharing::Job& job, Ranks* ranks, int num_threads,
+         const std::vector<int>& worker_threads, uint32_t serial)
+      : job_(job), ranks_(ranks), serial_(serial), here_(num_threads) {
+    const int num_ranks = ranks ? ranks->Size() : 1;
+    // Units in flight per rank: one per thread (or per threads_per_unit threads). Small
+    // units get one more waiting at another rank, so it never idles between a result and its
+    // next request; a large one waiting there could have started on a rank that is free.
+    const int per_unit = std::max(1, job.threads_per_unit);
+    capacity_.assign(num_ranks, 0);
+    in_flight_.assign(num_ranks, 0);
+    units_per_rank_.assign(num_ranks, 0);
+    capacity_[0] = std::max(1, num_threads / per_unit);
+    for (int rank = 1; rank < num_ranks; ++rank) {
+      capacity_[rank] = std::max(1, worker_threads[rank] / per_unit) + (per_unit == 1 ? 1 : 0);
+    }
+    int total = 0;
+    for (int c : capacity_) total += c;
+    // Units done but not yet finished (an earlier one is still out) are held; this bounds
+    // them.
+    window_ = 4 * static_cast<size_t>(total);
+  }
+
+  // Runs the job to its end; `units_per_rank` gets who computed how many.
+  void Run(std::vector<size_t>* units_per_rank) {
+    WaitBackoff backoff;
+    while (true) {
+      bool progressed = Collect();
+      while (oldest_ < next_ && done_[oldest_]) job_.finish(oldest_++);
+      if (no_more_ && oldest_ == next_) break;
+      progressed |= HandOut();
+      if (progressed) {
+        backoff.Reset();
+      } else {
+        backoff.Wait();
+      }
+    }
+    *units_per_rank = units_per_rank_;
+  }
+
+ private:
+  // Takes the results that have come, from the other ranks and this rank's threads; true
+  // when any had.
+  bool Collect() {
+    bool any = false;
+    while (ranks_) {
+      std::optional<RankMessage> message = ranks_->TryReceive();
+      if (!message) break;
+      any = true;
+      if (message->tag == kFailed) {
+        throw Error(fmt::format("rank {} failed: {}", message->from, message->bytes));
+      }
+      if (message->tag != kResult) continue;
+      ByteReader reader(message->bytes);
+      // A result of an earlier job that failed is dropped.
+      if (reader.Get<uint32_t>() != serial_) continue;
+      const size_t i = reader.Get<uint64_t>();
+      job_.take_result(i, message->from, reader);
+      Done(i, message->from);
+    }
+    for (DoneList::Item& item : here_.Done()) {
+      any = true;
+      if (item.error) std::rethrow_exception(item.error);
+      Done(item.index, 0);
+    }
+    return any;
+  }
+
+  void Done(size_t i, int rank) {
+    done_[i] = 1;
+    --in_flight_[rank];
+    ++units_per_rank_[rank];
+  }
+
+  // Hands out the next units while a rank has room; true when any went.
+  bool HandOut() {
+    bool any = false;
+    while (!no_more_ && next_ - oldest_ < window_) {
+      const int rank = RankWithMostRoom();
+      if (rank < 0) break;
+      if (!job_.next(next_)) {
+        no_more_ = true;
+        break;
+      }
+      const size_t i = next_++;
+      done_.push_back(0);
+      any = true;
+      if (job_.has_work && !job_.has_work(i)) {
+        done_[i] = 1;
+      } else if (rank > 0) {
+        ByteWriter request;
+        request.Put<uint8_t>(static_cast<uint8_t>(job_.kind));
+        request.Put<uint32_t>(serial_);
+        request.Put<uint64_t>(i);
+        job_.request(i, rank, request);
+        ranks_->Send(rank, kTask, request.Take());
+        ++in_flight_[rank];
+      } else {
+        ++in_flight_[0];
+        here_.Start(i, [this, i](ByteWriter&) { job_.compute(i); });
+      }
+    }
+    return any;
+  }
+
+  // The rank with the largest share of its capacity free (the last on ties, so the other
+  // ranks start first); -1 when none has room.
+  int RankWithMostRoom() const {
+    int best = -1;
+    double most_free = 0.0;
+    for (int r = static_cast<int>(capacity_.size()) - 1; r >= 0; --r) {
+      const double free = double(capacity_[r] - in_flight_[r]) / capacity_[r];
+      if (free > most_free) {
+        best = r;
+        most_free = free;
+      }
+    }
+    return best;
+  }
+
+  const WorkSharing::Job& job_;
+  Ranks* ranks_;
+  uint32_t serial_;
+  std::vector<int> capacity_, in_flight_;
+  std::vector<size_t> units_per_rank_;
+  size_t window_ = 0;
+  std::vector<char> done_;  // per unit
+  size_t next_ = 0, oldest_ = 0;
+  bool no_more_ = false;
+  // Last: its destructor waits for the units still running here, which use the members.
+  LocalThreads here_;
+};
+
 }  // namespace
 
 void LogRankShares(const std::string& what, const std::vector<size_t>& per_rank) {
@@ -135,99 +271,7 @@ void WorkSharing::AwaitWorkers() {
 void WorkSharing::Run(const Job& job) {
   if (stopped_) throw Error("the other ranks were already told the run is over");
   AwaitWorkers();
-  ++job_serial_;
-  const int num_ranks = NumRanks();
-  units_per_rank_.assign(num_ranks, 0);
-  // Units in flight per rank: one per thread (or per threads_per_unit threads). Small units
-  // get one more waiting at another rank, so it never idles between a result and its next
-  // request; a large one waiting there could have started on a rank that is free.
-  const int per_unit = std::max(1, job.threads_per_unit);
-  std::vector<int> capacity(num_ranks), in_flight(num_ranks, 0);
-  capacity[0] = std::max(1, num_threads_ / per_unit);
-  for (int rank = 1; rank < num_ranks; ++rank) {
-    capacity[rank] = std::max(1, worker_threads_[rank] / per_unit) + (per_unit == 1 ? 1 : 0);
-  }
-  int total_capacity = 0;
-  for (int c : capacity) total_capacity += c;
-  // Units done but not yet finished (an earlier one is still out) are held; this bounds them.
-  const size_t window = 4 * static_cast<size_t>(total_capacity);
-
-  // This thread hands out and collects; the units computed here run on threads of their own.
-  LocalThreads here(num_threads_);
-  std::vector<char> done;  // per unit
-  size_t next = 0, oldest = 0;
-  bool no_more = false;
-  WaitBackoff backoff;
-  while (true) {
-    bool progressed = false;
-    while (ranks_) {
-      std::optional<RankMessage> message = ranks_->TryReceive();
-      if (!message) break;
-      progressed = true;
-      if (message->tag == kFailed) {
-        throw Error(fmt::format("rank {} failed: {}", message->from, message->bytes));
-      }
-      if (message->tag != kResult) continue;
-      ByteReader reader(message->bytes);
-      // A result of an earlier job that failed is dropped.
-      if (reader.Get<uint32_t>() != job_serial_) continue;
-      const size_t i = reader.Get<uint64_t>();
-      job.take_result(i, message->from, reader);
-      done[i] = 1;
-      --in_flight[message->from];
-      ++units_per_rank_[message->from];
-    }
-    for (DoneList::Item& item : here.Done()) {
-      progressed = true;
-      if (item.error) std::rethrow_exception(item.error);
-      done[item.index] = 1;
-      --in_flight[0];
-      ++units_per_rank_[0];
-    }
-    while (oldest < next && done[oldest]) job.finish(oldest++);
-    if (no_more && oldest == next) break;
-
-    while (!no_more && next - oldest < window) {
-      // The rank with the largest share of its capacity free (the last on ties, so the
-      // other ranks start first).
-      int rank = -1;
-      double most_free = 0.0;
-      for (int r = num_ranks - 1; r >= 0; --r) {
-        const double free = double(capacity[r] - in_flight[r]) / capacity[r];
-        if (free > most_free) {
-          rank = r;
-          most_free = free;
-        }
-      }
-      if (rank < 0) break;
-      if (!job.next(next)) {
-        no_more = true;
-        break;
-      }
-      const size_t i = next++;
-      done.push_back(0);
-      progressed = true;
-      if (job.has_work && !job.has_work(i)) {
-        done[i] = 1;
-      } else if (rank > 0) {
-        ByteWriter request;
-        request.Put<uint8_t>(static_cast<uint8_t>(job.kind));
-        request.Put<uint32_t>(job_serial_);
-        request.Put<uint64_t>(i);
-        job.request(i, rank, request);
-        ranks_->Send(rank, kTask, request.Take());
-        ++in_flight[rank];
-      } else {
-        ++in_flight[0];
-        here.Start(i, [&job, i](ByteWriter&) { job.compute(i); });
-      }
-    }
-    if (progressed) {
-      backoff.Reset();
-    } else {
-      backoff.Wait();
-    }
-  }
+  JobRun(job, ranks_, num_threads_, worker_threads_, ++job_serial_).Run(&units_per_rank_);
 }
 
 void ServeWork(Ranks& ranks, const std::map<WorkKind, WorkHandler>& handlers, int num_threads) {
