@@ -14,7 +14,7 @@ namespace {
 // The launcher, allowed to run as root (CI containers), ranks allowed past the cores.
 std::string Mpirun(int num_ranks) {
   return fmt::format(
-      "OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 "
+      "env OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 "
       "OMPI_MCA_btl_vader_single_copy_mechanism=none mpirun -np {} --oversubscribe {}",
       num_ranks, ShellQuote(LoopsfmBinary().string()));
 }
@@ -100,7 +100,8 @@ TEST_F(CliMpiTest, ReconstructUnderMpirunIsReconstructInOneProcess) {
       "--intrinsics", (Scene() / "intrinsics.txt").string(), "-o"};
   const CommandResult shared = RunShell(Mpirun(2) + Args(args) + Args({(dir / "two").string()}));
   ASSERT_EQ(shared.exit_code, 0) << shared;
-  EXPECT_NE(shared.output.find("MPI: 2 ranks share extraction and matching"), std::string::npos)
+  EXPECT_NE(shared.output.find("MPI: 2 ranks share extraction, matching and segments"),
+            std::string::npos)
       << shared;
   EXPECT_NE(shared.output.find("match: pairs per rank: "), std::string::npos) << shared;
   std::vector<std::string> alone_args = args;
@@ -114,6 +115,23 @@ TEST_F(CliMpiTest, ReconstructUnderMpirunIsReconstructInOneProcess) {
                 ReadFileBytes(dir / "one" / "sparse" / "0" / file))
         << file;
   }
+}
+
+// A wrong command line under mpirun: rank 0 says what is wrong, the other ranks end, and
+// the run exits with code 2 (no rank waits for work forever).
+TEST_F(CliMpiTest, AWrongCommandLineEndsEveryRank) {
+  const CommandResult run =
+      RunShell("timeout 60 " + Mpirun(2) +
+               Args({"reconstruct", (Scene() / "video.mp4").string(), "-o",
+                     (dir_->path() / "flag_out").string(), "--no-such-flag"}));
+  EXPECT_EQ(run.exit_code, 2) << run;
+  EXPECT_NE(run.output.find("--no-such-flag"), std::string::npos) << run;
+  const CommandResult missing = RunShell(
+      "timeout 60 " + Mpirun(2) +
+      Args({"reconstruct", (dir_->path() / "missing.mp4").string(), "-o",
+            (dir_->path() / "missing_out").string()}));
+  EXPECT_EQ(missing.exit_code, 2) << missing;
+  EXPECT_NE(missing.output.find("missing.mp4"), std::string::npos) << missing;
 }
 
 // Rank 1 is killed once rank 0 has stored the first pairs: mpirun ends the run with an error

@@ -73,8 +73,10 @@ int main(int argc, char** argv) {
       return 0;
     }
   }
-  // Declared after the ranks: it tells them the run is over before MPI ends.
+  // Made before the command line is parsed, so the other ranks are told the run is over
+  // (when it ends, fails, or the command line is wrong) before MPI ends.
   std::optional<WorkSharing> sharing;
+  if (ranks) sharing.emplace(ranks.get(), ThreadsFlag(argc, argv));
   FLAGS_logtostderr = true;
   FLAGS_minloglevel = google::GLOG_ERROR;
   google::InitGoogleLogging(argv[0]);
@@ -96,9 +98,9 @@ int main(int argc, char** argv) {
     // solve that failed and was retried with more damping) are the solver's own business and
     // show only with -v; its errors always do.
     FLAGS_minloglevel = common.verbose ? google::GLOG_WARNING : google::GLOG_ERROR;
-    if (ranks) {
-      common.sharing = &sharing.emplace(ranks.get(), common.threads);
-      spdlog::info("MPI: {} ranks share extraction and matching", ranks->Size());
+    if (sharing) {
+      common.sharing = &*sharing;
+      spdlog::info("MPI: {} ranks share extraction, matching and segments", ranks->Size());
     }
   });
 
