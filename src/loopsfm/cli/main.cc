@@ -88,7 +88,10 @@ int main(int argc, char** argv) {
                                                 AllocatorName(),
                                                 BuiltWithMpi() ? "yes" : "no, one process"));
   auto& common = cli::Common();
-  app.add_option("--threads", common.threads, "Worker threads (0: all cores)")->capture_default_str();
+  app.add_option("--threads", common.threads,
+                 "Worker threads (0: all cores); under mpirun, per process (0: the machine's "
+                 "cores shared between the processes on it)")
+      ->capture_default_str();
   app.add_flag("-v,--verbose", common.verbose, "More log output");
   app.add_flag("-q,--quiet", common.quiet, "Only warnings and errors");
   app.parse_complete_callback([&] {
