@@ -398,14 +398,36 @@ TEST_F(CliSyntheticTest, SegmentsMergeIntoOneModelOfTheLoop) {
                            metrics.num_matched, metrics.num_gt_frames,
                            100.0 * metrics.ate_fraction_of_path, metrics.rotation_error_mean_deg);
 
-  for (const std::vector<std::string>& extra :
-       {std::vector<std::string>{"--mapper", "global"}, {"--withhold-loop-pairs"}}) {
-    std::vector<std::string> refused_args = args;
-    refused_args.insert(refused_args.end(), extra.begin(), extra.end());
-    const CommandResult refused = RunLoopsfm(refused_args);
-    EXPECT_EQ(refused.exit_code, 2) << refused;
-    EXPECT_NE(refused.output.find("--segments"), std::string::npos) << refused;
-  }
+  std::vector<std::string> refused_args = args;
+  refused_args.push_back("--withhold-loop-pairs");
+  const CommandResult refused = RunLoopsfm(refused_args);
+  EXPECT_EQ(refused.exit_code, 2) << refused;
+  EXPECT_NE(refused.output.find("--segments"), std::string::npos) << refused;
+
+  // The global mapper on each segment: the segments merge into one model of the loop too.
+  TempDir global_tmp("global");
+  fs::copy_file(run_->out / "database.db", global_tmp / "database.db");
+  std::vector<std::string> global_args = args;
+  global_args[std::find(args.begin(), args.end(), "-o") - args.begin() + 1] =
+      global_tmp.path().string();
+  global_args.insert(global_args.end(), {"--mapper", "global"});
+  const CommandResult global = RunLoopsfm(global_args);
+  ASSERT_EQ(global.exit_code, 0) << global;
+  EXPECT_FALSE(fs::exists(global_tmp / "sparse" / "1")) << "the segments did not merge" << global;
+  const TrajectoryMetrics global_metrics =
+      EvaluateTrajectory(ReadColmapModel(global_tmp / "sparse" / "0"), GroundTruth());
+  ASSERT_TRUE(global_metrics.aligned) << global_metrics.explanation;
+  EXPECT_GE(global_metrics.fraction_registered, kMinFractionRegistered);
+  EXPECT_LT(global_metrics.ate_fraction_of_path, kMaxAteFractionOfPath);
+  EXPECT_FALSE(fs::exists(global_tmp / "segments")) << "global segments have no checkpoints";
+  std::ifstream global_report(global_tmp / "report.html");
+  const std::string global_html((std::istreambuf_iterator<char>(global_report)),
+                                std::istreambuf_iterator<char>());
+  EXPECT_NE(global_html.find("\"mapper\":\"global, 3 segments\""), std::string::npos);
+  std::cout << fmt::format("[ info     ] 3 segments, global mapper: {} / {} registered, ATE "
+                           "{:.4f} % of the path\n",
+                           global_metrics.num_matched, global_metrics.num_gt_frames,
+                           100.0 * global_metrics.ate_fraction_of_path);
   const CommandResult overlap_alone = RunLoopsfm(
       {"reconstruct", (run_->scene / "video.mp4").string(), "-o", tmp.path().string(),
        "--segment-overlap", "6"});

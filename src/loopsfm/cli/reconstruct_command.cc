@@ -294,16 +294,15 @@ void AddReconstructCommand(CLI::App& app) {
                   "a rerun with the same seed repeats the model; other seeds show how much a "
                   "result owes to chance. Matching keeps its own seed")
       ->capture_default_str();
-  CLI::Option* segments =
-      cmd->add_option("--segments", flags->segments,
-                      "Incremental mapper: cut the frames into this many overlapping segments "
-                      "in capture order, map them at once (each with its share of --threads), "
-                      "merge them by their shared points, then close the loops between them "
-                      "(Sim3 pose graph) and refine the whole; --checkpoint-every saves each "
-                      "segment to OUT/segments/, and a rerun maps only the unfinished ones. 1: "
-                      "the whole video at once")
-          ->check(CLI::PositiveNumber)
-          ->capture_default_str();
+  cmd->add_option("--segments", flags->segments,
+                  "Cut the frames into this many overlapping segments in capture order, map "
+                  "them at once (each with its share of --threads; under mpirun, on the "
+                  "processes) with the mapper of --mapper, merge them by their shared points, "
+                  "then close the loops between them (Sim3 pose graph) and refine the whole; "
+                  "--checkpoint-every saves each incremental segment to OUT/segments/, and a "
+                  "rerun maps only the unfinished ones. 1: the whole video at once")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
   CLI::Option* segment_overlap =
       cmd->add_option("--segment-overlap", flags->segment_overlap,
                       "With --segments: frames each segment shares with the next (of the "
@@ -326,10 +325,6 @@ void AddReconstructCommand(CLI::App& app) {
               "out, or use --mapper incremental",
               option->get_name()));
         }
-      }
-      if (segments->count() > 0) {
-        throw InvalidArgument("--segments are mapped by the incremental mapper; the global mapper "
-                              "maps the whole video at once: leave out one of them");
       }
       options.mapper_kind = MapperKind::kGlobal;
     } else if (flags->mapper != "incremental") {

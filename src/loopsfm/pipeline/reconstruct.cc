@@ -29,9 +29,6 @@ void ReconstructOptions::Check() const {
   mapper.Check();
   global_mapper.Check();
   segments.Check();
-  LOOPSFM_REQUIRE_OPTION(segments.num_segments == 1 || mapper_kind == MapperKind::kIncremental,
-                         "segments are mapped by the incremental mapper; the global mapper maps "
-                         "the whole video at once");
   LOOPSFM_REQUIRE_OPTION(segments.num_segments == 1 || !mapper.loop_closure.withhold_loop_pairs,
                          "segments withhold the loop pairs until they are merged already; leave "
                          "out withhold_loop_pairs");
@@ -195,15 +192,18 @@ void FillInGaps(const fs::path& input, Database& database, const ReconstructOpti
 
 namespace {
 
-// The incremental mapper on segments; with checkpoints, each segment's in
-// OUT/segments/segment_K.bin.
+// The mapper (incremental or global) on segments; with checkpoints (the incremental mapper),
+// each segment's in OUT/segments/segment_K.bin.
 std::vector<Reconstruction> MapSegmented(const MapperInput& mapper_input,
                                          const ReconstructOptions& options,
                                          const fs::path& checkpoint_dir, int pass,
                                          ReconstructReport* report) {
   report->segments.emplace();
   SegmentMappingOptions segments = options.segments;
-  if (options.checkpoint_interval_seconds > 0.0) {
+  if (options.mapper_kind == MapperKind::kGlobal) {
+    segments.global_mapper = options.global_mapper;
+    segments.global_mapper->verification = options.match.verification;
+  } else if (options.checkpoint_interval_seconds > 0.0) {
     segments.checkpoint_dir = checkpoint_dir;
     segments.checkpoint_interval_seconds = options.checkpoint_interval_seconds;
   }
@@ -316,10 +316,10 @@ ReconstructReport Reconstruct(const fs::path& input, const fs::path& output_dir,
     }
 
     stage.Restart();
-    if (options.mapper_kind == MapperKind::kGlobal) {
-      models = MapGlobally(mapper_input, options, pass, &report);
-    } else if (options.segments.num_segments > 1) {
+    if (options.segments.num_segments > 1) {
       models = MapSegmented(mapper_input, options, segment_checkpoints, pass, &report);
+    } else if (options.mapper_kind == MapperKind::kGlobal) {
+      models = MapGlobally(mapper_input, options, pass, &report);
     } else {
       // The fingerprint digests the whole mapper input: only with checkpoints.
       std::optional<MapperCheckpointFile> checkpoint;

@@ -88,7 +88,8 @@ nlohmann::json RunReportData(const ReconstructReport& report,
   data["created"] = fmt::format("{:%Y-%m-%dT%H:%M:%SZ}", fmt::gmtime(std::time(nullptr)));
   size_t registered = 0;
   for (const Reconstruction& model : models) registered += model.NumRegImages();
-  std::string mapper = report.global_mapper ? "global" : "incremental";
+  const bool global = report.global_mapper || (report.segments && report.segments->global);
+  std::string mapper = global ? "global" : "incremental";
   if (report.segments) mapper += fmt::format(", {} segments", report.segments->segments.size());
   data["summary"] = {{"frames", report.num_frames},
                      {"mapper", mapper},

@@ -10,6 +10,7 @@
 #include "loopsfm/loop/loop_closing.h"
 #include "loopsfm/pipeline/mapper_checkpoint.h"
 #include "loopsfm/pipeline/wire_format.h"
+#include "loopsfm/sfm/global_mapper.h"
 #include "loopsfm/sfm/incremental_mapper.h"
 #include "loopsfm/sfm/mapper_state.h"
 #include "loopsfm/sfm/model_merger.h"
@@ -63,20 +64,26 @@ struct SegmentResult {
   SegmentReport report;
 };
 
-// Maps a part of the input (a segment's frames); with a checkpoint path, saves the mapping
-// state there now and then, and goes on from what is there.
+// Maps a part of the input (a segment's frames), by the global mapper where `global` is set;
+// with a checkpoint path (the incremental mapper only), saves the mapping state there now and
+// then, and goes on from what is there.
 SegmentResult MapPart(const MapperInput& part, const IncrementalMapperOptions& options,
+                      const std::optional<GlobalMapperOptions>& global,
                       const fs::path& checkpoint_path, double checkpoint_interval_seconds) {
   Timer timer;
   SegmentResult result;
-  std::optional<MapperCheckpointFile> checkpoint;
-  if (!checkpoint_path.empty()) {
-    checkpoint.emplace(checkpoint_path, part, options, checkpoint_interval_seconds);
-    result.report.resumed = checkpoint->Finished();
+  std::vector<Reconstruction> models;
+  if (global) {
+    models = RunGlobalMapper(part, options, *global, nullptr, &result.mapper_report);
+  } else {
+    std::optional<MapperCheckpointFile> checkpoint;
+    if (!checkpoint_path.empty()) {
+      checkpoint.emplace(checkpoint_path, part, options, checkpoint_interval_seconds);
+      result.report.resumed = checkpoint->Finished();
+    }
+    models = MapWithLoopClosing(part, options, &result.mapper_report, {},
+                                checkpoint ? checkpoint->checkpointing() : MapperCheckpointing{});
   }
-  std::vector<Reconstruction> models =
-      MapWithLoopClosing(part, options, &result.mapper_report, {},
-                         checkpoint ? checkpoint->checkpointing() : MapperCheckpointing{});
   result.report.num_models = static_cast<int>(models.size());
   result.report.num_loops_closed = static_cast<int>(result.mapper_report.loops_closed.size());
   if (!models.empty()) {
@@ -120,7 +127,7 @@ std::vector<SegmentResult> MapSegments(const MapperInput& input,
   IncrementalMapperOptions segment_options = mapper_options;
   segment_options.num_threads = std::max(1, threads / std::max(parallel, 1));
   fs::path checkpoint_dir;
-  if (!options.checkpoint_dir.empty()) {
+  if (!options.checkpoint_dir.empty() && !options.global_mapper) {
     // Absolute, for the ranks that write their segments' checkpoints there too.
     checkpoint_dir = fs::absolute(options.checkpoint_dir);
     std::error_code ec;
@@ -152,11 +159,13 @@ std::vector<SegmentResult> MapSegments(const MapperInput& input,
   WorkSharing& sharing = own_sharing ? *own_sharing : *options.sharing;
   job.next = [&](size_t k) { return k < plan.size(); };
   job.compute = [&](size_t k) {
-    results[k] = MapPart(part_of(k), segment_options, checkpoint_of(k),
+    results[k] = MapPart(part_of(k), segment_options, options.global_mapper, checkpoint_of(k),
                          options.checkpoint_interval_seconds);
   };
   job.request = [&](size_t k, int, ByteWriter& request) {
     request.Put(segment_options);
+    request.Put<uint8_t>(options.global_mapper ? 1 : 0);
+    if (options.global_mapper) request.Put(*options.global_mapper);
     request.PutString(checkpoint_of(k).string());
     request.Put(options.checkpoint_interval_seconds);
     PutMapperInput(request, part_of(k));
@@ -214,17 +223,20 @@ std::vector<Reconstruction> MergeSegments(const MapperInput& chain,
 WorkHandler SegmentWorkHandler() {
   return [](ByteReader& request) {
     const auto options = request.Get<IncrementalMapperOptions>();
+    std::optional<GlobalMapperOptions> global;
+    if (request.Get<uint8_t>()) global = request.Get<GlobalMapperOptions>();
     const fs::path checkpoint = request.GetString();
     const auto checkpoint_interval_seconds = request.Get<double>();
     auto part = std::make_shared<const MapperInput>(GetMapperInput(request));
-    return [options, checkpoint, checkpoint_interval_seconds, part](ByteWriter& result) {
+    return [options, global, checkpoint, checkpoint_interval_seconds, part](ByteWriter& result) {
       // On another machine the folder may not be there yet (no shared file system: the
       // checkpoint then stays on this machine, and a rerun maps the segment again).
       if (!checkpoint.empty()) {
         std::error_code ignored;  // MapperCheckpointFile says what is wrong if it is needed
         fs::create_directories(checkpoint.parent_path(), ignored);
       }
-      PutSegmentResult(result, MapPart(*part, options, checkpoint, checkpoint_interval_seconds));
+      PutSegmentResult(result,
+                       MapPart(*part, options, global, checkpoint, checkpoint_interval_seconds));
     };
   };
 }
@@ -244,6 +256,7 @@ std::vector<Reconstruction> MapInSegments(const MapperInput& input,
   if (!report) report = &local_report;
   if (!mapper_report) mapper_report = &local_mapper_report;
   *report = {};
+  report->global = options.global_mapper.has_value();
 
   Timer timer;
   const std::vector<SegmentResult> results = MapSegments(

@@ -19,11 +19,13 @@
 //       MapInSegments(input, mapper_options, segments, &report, &mapper_report);
 
 #include <filesystem>
+#include <optional>
 #include <utility>
 #include <vector>
 
 #include "loopsfm/pipeline/work_sharing.h"
 #include "loopsfm/scene/reconstruction.h"
+#include "loopsfm/sfm/global_mapper_options.h"
 #include "loopsfm/sfm/mapper_input.h"
 #include "loopsfm/sfm/mapper_options.h"
 #include "loopsfm/sfm/mapper_report.h"
@@ -45,6 +47,10 @@ struct SegmentMappingOptions {
   // from there: a finished segment is not mapped again. Empty: no checkpoints.
   std::filesystem::path checkpoint_dir;
   double checkpoint_interval_seconds = 60.0;
+  // Where set, each segment is mapped by the global mapper with these options instead of the
+  // incremental one (the merge, the frames a segment left out and the loops between segments
+  // are still the incremental mapper's work). Such segments have no checkpoints.
+  std::optional<GlobalMapperOptions> global_mapper;
   // The ranks of an MPI run to share the segments with (null: this process alone). The
   // checkpoint folder must then be one they all reach (a shared file system).
   WorkSharing* sharing = nullptr;
@@ -70,6 +76,8 @@ struct SegmentReport {
 
 struct SegmentMappingReport {
   std::vector<SegmentReport> segments;
+  // The segments were mapped by the global mapper.
+  bool global = false;
   // The merge left frames out or several models, and the incremental mapper went on from
   // them (part of the merging time).
   bool extended = false;

@@ -2,11 +2,17 @@
 
 #include <gtest/gtest.h>
 
+#include <unistd.h>
+
+#include <filesystem>
+#include <iostream>
+#include <string>
 #include <thread>
 
 #include <tbb/global_control.h>
 
 #include "loopsfm/loop/loop_closing.h"
+#include "loopsfm/sfm/global_mapper.h"
 #include "loopsfm/pipeline/work_sharing.h"
 #include "loopsfm/sfm/loop_test_problem.h"
 #include "loopsfm/sfm/sfm_test_problem.h"
@@ -76,6 +82,37 @@ TEST(SegmentMapping, ThreeSegmentsOfALoopWalkMergeIntoOneModel) {
   const testing::PoseError whole_error = testing::ComparePoses(whole[0], p);
   EXPECT_LT(error.max_centre_error, std::max(1.25 * whole_error.max_centre_error, 0.002));
   EXPECT_LT(error.max_rotation_deg, std::max(1.25 * whole_error.max_rotation_deg, 0.1));
+}
+
+// The global mapper on each of three segments of the loop walk: merged into one model of
+// every frame, as accurate as the global mapper on the whole walk, with no checkpoints (the
+// global mapper has none).
+TEST(SegmentMapping, SegmentsMappedByTheGlobalMapperMergeIntoOneModel) {
+  const testing::MapperProblem p = testing::WalkOutAndBack();
+  SegmentMappingOptions options;
+  options.num_segments = 3;
+  options.overlap = 8;
+  options.global_mapper = GlobalMapperOptions();
+  const std::filesystem::path dir = std::filesystem::temp_directory_path() /
+                                    ("loopsfm_global_segments_" + std::to_string(::getpid()));
+  std::filesystem::remove_all(dir);
+  options.checkpoint_dir = dir;
+  SegmentMappingReport report;
+  const std::vector<Reconstruction> models =
+      MapInSegments(p.input, testing::LoopOptions(), options, &report, nullptr);
+  EXPECT_TRUE(report.global);
+  ASSERT_EQ(models.size(), 1u);
+  EXPECT_EQ(models[0].NumRegImages(), 80u);
+  const double error = testing::ComparePoses(models[0], p).max_centre_error;
+  // Against the global mapper on the whole walk.
+  const std::vector<Reconstruction> whole =
+      RunGlobalMapper(p.input, testing::LoopOptions(), GlobalMapperOptions(), nullptr, nullptr);
+  ASSERT_FALSE(whole.empty());
+  const double whole_error = testing::ComparePoses(whole[0], p).max_centre_error;
+  std::cout << "[ info     ] max centre error: global segments " << error << ", global whole "
+            << whole_error << "\n";
+  EXPECT_LT(error, std::max(1.25 * whole_error, 0.002));
+  EXPECT_FALSE(std::filesystem::exists(dir));
 }
 
 // The same models whether the segments are mapped one at a time, all at once, or on other
