@@ -91,6 +91,23 @@ PairResult MatchPair(const Camera& camera1, const FeatureSet& features1, const C
   return result;
 }
 
+// A pair's result as it travels from the rank that computed it.
+void PutPairResult(ByteWriter& w, const PairResult& result) {
+  w.PutVector(result.matches);
+  PutGeometry(w, result.verification.geometry);
+  w.Put(result.match_ms);
+  w.Put(result.verify_ms);
+}
+
+PairResult GetPairResult(ByteReader& r) {
+  PairResult result;
+  result.matches = r.GetVector<FeatureMatch>();
+  result.verification.geometry = GetGeometry(r);
+  result.match_ms = r.Get<double>();
+  result.verify_ms = r.Get<double>();
+  return result;
+}
+
 // Pairs per unit of work: enough to be worth a message, few enough to balance.
 constexpr size_t kPairsPerUnit = 4;
 
@@ -172,14 +189,9 @@ WorkHandler MatchWorkHandler() {
     }
     return [work = std::move(work), matcher, verification, random](ByteWriter& result) {
       for (const auto& [pair, frames] : work) {
-        const PairResult r =
-            MatchPair(frames[0]->camera, frames[0]->features, frames[1]->camera,
-                      frames[1]->features, matcher, verification,
-                      random.Derive(PairToPairId(pair)));
-        result.PutVector(r.matches);
-        PutGeometry(result, r.verification.geometry);
-        result.Put(r.match_ms);
-        result.Put(r.verify_ms);
+        PutPairResult(result, MatchPair(frames[0]->camera, frames[0]->features,
+                                        frames[1]->camera, frames[1]->features, matcher,
+                                        verification, random.Derive(PairToPairId(pair))));
       }
     };
   };
@@ -253,13 +265,7 @@ std::vector<bool> PairMatcher::Match(const std::vector<ImagePair>& all_pairs, Ma
     job.take_result = [&](size_t unit, int rank, ByteReader& result) {
       if (unit + 1 == num_units) last_unit_rank = rank;
       const auto [first, last] = pairs_of(unit);
-      for (size_t k = first; k < last; ++k) {
-        PairResult& pair_result = results[k];
-        pair_result.matches = result.GetVector<FeatureMatch>();
-        pair_result.verification.geometry = GetGeometry(result);
-        pair_result.match_ms = result.Get<double>();
-        pair_result.verify_ms = result.Get<double>();
-      }
+      for (size_t k = first; k < last; ++k) results[k] = GetPairResult(result);
     };
     job.finish = [&](size_t unit) {
       const auto [first, last] = pairs_of(unit);

@@ -141,7 +141,14 @@ std::vector<SegmentResult> MapSegments(const MapperInput& input,
     return checkpoint_dir.empty() ? fs::path()
                                   : checkpoint_dir / fmt::format("segment_{}.bin", k);
   };
-  auto part_of = [&](size_t k) { return InputPart(input, plan[k].first, plan[k].second); };
+  // Each segment's part of the input, made once (for the request and the model that comes
+  // back, or for mapping here) and let go when the segment is done. Slots are distinct per
+  // segment, so the threads mapping segments here do not share one.
+  std::vector<std::optional<MapperInput>> parts(plan.size());
+  auto part_of = [&](size_t k) -> const MapperInput& {
+    if (!parts[k]) parts[k] = InputPart(input, plan[k].first, plan[k].second);
+    return *parts[k];
+  };
 
   std::vector<SegmentResult> results(plan.size());
   std::optional<WorkSharing> own_sharing;
@@ -174,6 +181,7 @@ std::vector<SegmentResult> MapSegments(const MapperInput& input,
     results[k] = GetSegmentResult(result, part_of(k));
   };
   job.finish = [&](size_t k) {
+    parts[k].reset();
     SegmentReport& report = results[k].report;
     report.first_frame = static_cast<int>(plan[k].first);
     report.num_frames = static_cast<int>(plan[k].second - plan[k].first);
