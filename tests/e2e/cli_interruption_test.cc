@@ -93,6 +93,26 @@ TEST(Interruption, KilledWhileMappingGoesOnFromTheCheckpointToTheSameModel) {
       << killed_again << "\n" << ReadFileBytes(dir / "killed2.log");
   ExpectSameResult(dir / "reference", dir / "killed");
 
+  // Ctrl-C (SIGINT) while mapping with those options: the run stops at its next registration,
+  // says so and exits 130, leaving the earlier model as it was; the same command then goes on
+  // from the checkpoint and finishes.
+  fs::copy_file(checkpoint, dir / "checkpoint.before", fs::copy_options::overwrite_existing);
+  const CommandResult interrupted = RunShell(fmt::format(
+      "{}{} --loop-closing none > {} 2>&1 & pid=$!; while cmp -s {} {} && kill -0 $pid "
+      "2>/dev/null; do sleep 0.05; done; kill -INT $pid; wait $pid",
+      ShellQuote(LoopsfmBinary().string()), other, ShellQuote((dir / "interrupted.log").string()),
+      ShellQuote(checkpoint.string()), ShellQuote((dir / "checkpoint.before").string())));
+  const std::string interrupted_log = ReadFileBytes(dir / "interrupted.log");
+  ASSERT_EQ(interrupted.exit_code, 130) << interrupted << "\n" << interrupted_log;
+  EXPECT_NE(interrupted_log.find("loopsfm: stopped: asked to stop during map"), std::string::npos)
+      << interrupted_log;
+  ExpectSameResult(dir / "reference", dir / "killed");
+  std::vector<std::string> without_loops = ReconstructArgs(video, dir / "killed");
+  without_loops.insert(without_loops.end(), {"--loop-closing", "none"});
+  const CommandResult resumed = RunLoopsfm(without_loops);
+  ASSERT_EQ(resumed.exit_code, 0) << resumed;
+  EXPECT_NE(resumed.output.find("going on from a checkpoint"), std::string::npos) << resumed;
+
   // --checkpoint-every 0 neither reads nor writes one; --overwrite deletes it.
   const CommandResult overwrite = RunLoopsfm({"-q", "--threads", "1", "reconstruct",
                                               video.string(), "-o", (dir / "killed").string(),

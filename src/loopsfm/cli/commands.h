@@ -14,6 +14,7 @@ void AddMatchCommand(CLI::App& app);
 void AddTracksCommand(CLI::App& app);
 void AddSynthCommand(CLI::App& app);
 void AddReconstructCommand(CLI::App& app);
+void AddMapCommand(CLI::App& app);
 void AddEvalCommand(CLI::App& app);
 void AddVocabCommand(CLI::App& app);
 void AddExportCommand(CLI::App& app);

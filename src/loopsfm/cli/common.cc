@@ -1,3 +1,4 @@
+#include <cstdio>
 #include <filesystem>
 #include <fstream>
 
@@ -11,6 +12,14 @@ namespace loopsfm::cli {
 CommonFlags& Common() {
   static CommonFlags flags;  // parsed once by main; read by the subcommand callbacks
   return flags;
+}
+
+void DeliverReport(const nlohmann::json& report, const std::string& text) {
+  if (Common().report) {
+    *Common().report = report;
+  } else if (!text.empty()) {
+    std::fputs(text.c_str(), stdout);
+  }
 }
 
 void WriteJsonReport(const std::string& path, const nlohmann::json& report) {

@@ -7,6 +7,7 @@
 
 #include "loopsfm/pipeline/work_sharing.h"
 #include "loopsfm/storage/database.h"
+#include "loopsfm/util/progress.h"
 
 namespace loopsfm::cli {
 
@@ -18,9 +19,19 @@ struct CommonFlags {
   // The other ranks of an MPI run, which extraction and matching share their work with
   // (null: this process alone).
   WorkSharing* sharing = nullptr;
+  // Who follows the run's progress and may stop it (Ctrl-C in the program; the Python
+  // module's callback and KeyboardInterrupt); null: nobody.
+  const RunHooks* hooks = nullptr;
+  // Where a command run in-process (RunCommand, app.h) puts its report; null: the program,
+  // which prints it.
+  nlohmann::json* report = nullptr;
 };
-// The global flags, parsed once by main() before any subcommand callback runs.
+// The global flags, parsed before any subcommand callback runs.
 CommonFlags& Common();
+
+// Hands a command's report to whoever ran it: RunCommand's caller gets `report`; the program
+// prints `text` to stdout (nothing when empty).
+void DeliverReport(const nlohmann::json& report, const std::string& text);
 
 // Writes a stage's report as JSON (--json-report); StorageError when it cannot.
 void WriteJsonReport(const std::string& path, const nlohmann::json& report);

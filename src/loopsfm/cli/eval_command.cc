@@ -159,7 +159,7 @@ void AddEvalCommand(CLI::App& app) {
       WritePlot(flags->plot, ground_truth, plotted, names, links, flags->plot_links);
     }
     if (flags->json) {
-      std::puts(ToJson(metrics, false).dump(2).c_str());
+      DeliverReport(ToJson(metrics, true), ToJson(metrics, false).dump(2) + "\n");
       return;
     }
     std::string out;
@@ -203,7 +203,7 @@ void AddEvalCommand(CLI::App& app) {
             gaps.num_revisits);
       }
     }
-    std::fputs(out.c_str(), stdout);
+    DeliverReport(ToJson(metrics, true), out);
   });
 }
 

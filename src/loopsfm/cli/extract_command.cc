@@ -35,6 +35,7 @@ void AddExtractCommand(CLI::App& app) {
         report.FramesPerSecond(), report.seconds, PeakResidentBytes() / (1024.0 * 1024.0));
     LogRankShares("extract: frames", report.frames_per_rank);
     if (!flags->json_report.empty()) WriteJsonReport(flags->json_report, ToJson(report));
+    DeliverReport(ToJson(report), "");
   });
 }
 

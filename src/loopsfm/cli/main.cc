@@ -1,7 +1,11 @@
-// loopsfm: camera path and sparse 3D structure from video.
+// loopsfm: camera poses and a sparse 3D point cloud from video.
 
+#include <unistd.h>
+
+#include <csignal>
 #include <cstdio>
 #include <algorithm>
+#include <atomic>
 #include <cstdlib>
 #include <memory>
 #include <optional>
@@ -14,6 +18,7 @@
 #include <mimalloc.h>
 #endif
 
+#include "loopsfm/cli/app.h"
 #include "loopsfm/cli/commands.h"
 #include "loopsfm/pipeline/mpi_ranks.h"
 #include "loopsfm/pipeline/work_sharing.h"
@@ -48,6 +53,21 @@ int ThreadsFlag(int argc, char** argv) {
   return 0;
 }
 
+// Ctrl-C: the first asks the run to stop at its next step (what is stored stays, and the
+// same command goes on from there); a second one ends the program at once.
+std::atomic<bool> stop_requested{false};
+
+void OnInterrupt(int) {
+  if (stop_requested.exchange(true)) {
+    std::signal(SIGINT, SIG_DFL);
+    std::raise(SIGINT);
+    return;
+  }
+  constexpr char kMessage[] =
+      "\nloopsfm: stopping at the next step (Ctrl-C again to stop at once)\n";
+  [[maybe_unused]] const auto written = write(2, kMessage, sizeof(kMessage) - 1);
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -80,41 +100,15 @@ int main(int argc, char** argv) {
   FLAGS_logtostderr = true;
   FLAGS_minloglevel = google::GLOG_ERROR;
   google::InitGoogleLogging(argv[0]);
-  CLI::App app{"loopsfm: camera poses and a sparse point cloud from video, with loop closing"};
-  app.require_subcommand(1);
-  // --threads, -v and -q work after the subcommand too (`loopsfm reconstruct ... -q`).
-  app.fallthrough();
-  app.set_version_flag("--version", fmt::format("loopsfm 0.1.0 (memory allocator: {}; MPI: {})",
-                                                AllocatorName(),
-                                                BuiltWithMpi() ? "yes" : "no, one process"));
-  auto& common = cli::Common();
-  app.add_option("--threads", common.threads,
-                 "Worker threads (0: all cores); under mpirun, per process (0: the machine's "
-                 "cores shared between the processes on it)")
-      ->capture_default_str();
-  app.add_flag("-v,--verbose", common.verbose, "More log output");
-  app.add_flag("-q,--quiet", common.quiet, "Only warnings and errors");
-  app.parse_complete_callback([&] {
-    SetupLogging(common.quiet ? Verbosity::kQuiet
-                              : common.verbose ? Verbosity::kVerbose : Verbosity::kNormal);
-    // Ceres logs through glog (to the terminal, never to log files): its warnings (a linear
-    // solve that failed and was retried with more damping) are the solver's own business and
-    // show only with -v; its errors always do.
-    FLAGS_minloglevel = common.verbose ? google::GLOG_WARNING : google::GLOG_ERROR;
-    if (sharing) {
-      common.sharing = &*sharing;
-      spdlog::info("MPI: {} ranks share extraction, matching and segments", ranks->Size());
-    }
-  });
-
-  cli::AddReconstructCommand(app);
-  cli::AddEvalCommand(app);
-  cli::AddExportCommand(app);
-  cli::AddExtractCommand(app);
-  cli::AddMatchCommand(app);
-  cli::AddTracksCommand(app);
-  cli::AddSynthCommand(app);
-  cli::AddVocabCommand(app);
+  // Under MPI, mpirun passes Ctrl-C on to every rank, and the ranks end together.
+  RunHooks hooks;
+  if (!ranks) {
+    std::signal(SIGINT, OnInterrupt);
+    hooks.stop_requested = [] { return stop_requested.load(); };
+    cli::Common().hooks = &hooks;
+  }
+  CLI::App app;
+  cli::AddCommands(app, sharing ? &*sharing : nullptr, AllocatorName());
 
   try {
     app.parse(argc, argv);

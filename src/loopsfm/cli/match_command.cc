@@ -54,6 +54,7 @@ void AddMatchCommand(CLI::App& app) {
     TrackBuildReport tracks;
     BuildTracksFromDatabase(database, {}, &tracks);
     LogTrackReport(tracks);
+    DeliverReport(ToJson(report), "");
   });
 }
 

@@ -4,6 +4,7 @@
 #include <fmt/format.h>
 
 #include "loopsfm/cli/commands.h"
+#include "loopsfm/cli/map_flags.h"
 #include "loopsfm/cli/stage_flags.h"
 #include "loopsfm/math/random.h"
 #include "loopsfm/pipeline/reconstruct.h"
@@ -17,7 +18,7 @@ std::string IncrementalMapperSummary(const MapperReport& m);
 std::string GlobalMapperSummary(const GlobalMapperReport& g, const MapperReport& m);
 std::string SegmentSummary(const SegmentMappingReport& s);
 
-void PrintSummary(const ReconstructReport& report) {
+std::string SummaryText(const ReconstructReport& report) {
   std::string out = "\n";
   out += fmt::format("{:<28}{}\n", "frames", report.num_frames);
   const ExtractReport& e = report.extract;
@@ -83,7 +84,7 @@ void PrintSummary(const ReconstructReport& report) {
   if (report.segments) out += SegmentSummary(*report.segments);
   out += fmt::format("{:<28}{:.1f} s, peak memory {:.0f} MiB\n", "total", report.total_seconds,
                      report.peak_memory_bytes / 1048576.0);
-  std::fputs(out.c_str(), stdout);
+  return out;
 }
 
 std::string IncrementalMapperSummary(const MapperReport& m) {
@@ -197,23 +198,11 @@ void AddReconstructCommand(CLI::App& app) {
     std::string input, output;
     ExtractFlags extract;
     MatchFlags match;
-    bool text = false;
-    std::string export_formats = "default";
-    std::string groundtruth;
-    bool no_self_calibration = false;
-    std::string refine;
-    std::string mapper = "incremental";
-    std::string loop_closing = "posegraph";
-    bool withhold_loop_pairs = false;
-    bool alternate_poses = false;
+    MapFlags map;
     bool overwrite = false;
     bool all_frames = false;
     bool localized_in_model = false;
     int fill_in_rounds = 3;
-    double checkpoint_every = 60.0;
-    int segments = 1;
-    int segment_overlap = 20;
-    uint64_t seed = kDefaultRandomSeed;
   };
   auto flags = std::make_shared<Flags>();
   CLI::App* cmd = app.add_subcommand(
@@ -226,39 +215,7 @@ void AddReconstructCommand(CLI::App& app) {
       ->required();
   AddExtractFlags(cmd, &flags->extract);
   AddMatchFlags(cmd, &flags->match);
-  cmd->add_flag("--text", flags->text, "Also write the COLMAP model as .txt files");
-  cmd->add_option("--export", flags->export_formats,
-                  std::string("What to write after mapping: ") + kExportFormatsHelp +
-                      "; or all, none, default (all but gsplat)")
-      ->capture_default_str();
-  cmd->add_option("--groundtruth", flags->groundtruth,
-                  "Ground truth trajectory ('name tx ty tz qx qy qz qw' per line, "
-                  "camera-to-world): the report aligns the path to it and shows its errors")
-      ->check(CLI::ExistingFile);
-  cmd->add_option("--refine", flags->refine,
-                  "Intrinsics that global bundle adjustment refines, for every camera: any of "
-                  "focal,principal-point,distortion or none (default: focal,distortion without "
-                  "--intrinsics, none with)");
-  cmd->add_flag("--no-self-calibration", flags->no_self_calibration,
-                "Without --intrinsics, start mapping from the guessed focal length (1.2 x the "
-                "image size) instead of estimating it from the pairs' fundamental matrices");
-  cmd->add_option("--mapper", flags->mapper,
-                      "incremental: frames registered one by one, with loop closing and "
-                      "checkpoints | global: every camera at once (view-graph cleaning, rotation "
-                      "averaging, global positioning of cameras and points, bundle adjustment); "
-                      "loops are closed by the loop pairs in the view graph; no checkpoints")
-          ->capture_default_str();
-  CLI::Option* loop_closing = cmd->add_option("--loop-closing", flags->loop_closing,
-                  "posegraph: when the camera returns after drift, correct the map while mapping "
-                  "(Sim3 pose graph, then the two ends' points are fused) | split: after "
-                  "mapping, tie the two ends of split tracks together in a bundle adjustment "
-                  "(depth-normalised point constraints) | both: posegraph, then split | none: "
-                  "map without loop closing")
-      ->capture_default_str();
-  CLI::Option* withhold = cmd->add_flag("--withhold-loop-pairs", flags->withhold_loop_pairs,
-                "Evaluation: map without the pairs between frames 50 or more apart, then add "
-                "them and close the loops at the end (drift grows unchecked until then; compare "
-                "with --loop-closing none)");
+  AddMapFlags(cmd, &flags->map);
   CLI::Option* fill_in_rounds =
       cmd->add_option("--fill-in-rounds", flags->fill_in_rounds,
                       "Adaptive keyframes: rounds of in-between frames added where two "
@@ -281,95 +238,15 @@ void AddReconstructCommand(CLI::App& app) {
                 "Start again: delete OUT/database.db and OUT/mapper_checkpoint.bin first instead "
                 "of resuming from them (needed when the input or the extract / match options "
                 "changed since they were made)");
-  CLI::Option* checkpoint_every = cmd->add_option("--checkpoint-every", flags->checkpoint_every,
-                  "Save the mapping state to OUT/mapper_checkpoint.bin (with --segments, each "
-                  "segment's to OUT/segments/) every this many seconds and when mapping ends; a "
-                  "rerun after an interruption goes on from it (and one after a finished run "
-                  "skips mapping). 0: no checkpoints")
-      ->check(CLI::NonNegativeNumber)
-      ->capture_default_str();
-  cmd->add_option("--seed", flags->seed,
-                  "Seed of the mapper's random sampling (registration RANSAC, loop closing; the "
-                  "global mapper's starting positions): "
-                  "a rerun with the same seed repeats the model; other seeds show how much a "
-                  "result owes to chance. Matching keeps its own seed")
-      ->capture_default_str();
-  cmd->add_option("--segments", flags->segments,
-                  "Cut the frames into this many overlapping segments in capture order, map "
-                  "them at once (each with its share of --threads; under mpirun, on the "
-                  "processes) with the mapper of --mapper, merge them by their shared points, "
-                  "then close the loops between them (Sim3 pose graph) and refine the whole; "
-                  "--checkpoint-every saves each incremental segment to OUT/segments/, and a "
-                  "rerun maps only the unfinished ones. 1: the whole video at once")
-      ->check(CLI::PositiveNumber)
-      ->capture_default_str();
-  CLI::Option* segment_overlap =
-      cmd->add_option("--segment-overlap", flags->segment_overlap,
-                      "With --segments: frames each segment shares with the next (of the "
-                      "frames kept for mapping)")
-          ->check(CLI::Range(2, 1000000))
-          ->capture_default_str();
-  CLI::Option* alternate_poses = cmd->add_flag("--alternate-poses", flags->alternate_poses,
-                "Diagnostic: after each registration, a second RANSAC over the correspondences "
-                "the first rejected; writes OUT/registrations.csv (both rounds' inliers, and "
-                "where a second plausible pose was found, how far it is) and plots the two "
-                "rounds' inlier ratios in report.html. Does not change the mapping");
   cmd->callback([=] {
     ReconstructOptions options;
-    if (flags->mapper == "global") {
-      for (const CLI::Option* option : {loop_closing, withhold, checkpoint_every, alternate_poses}) {
-        if (option->count() > 0) {
-          throw InvalidArgument(fmt::format(
-              "{} is an option of the incremental mapper; the global mapper closes loops "
-              "through the loop pairs in its view graph and has no checkpoints yet: leave it "
-              "out, or use --mapper incremental",
-              option->get_name()));
-        }
-      }
-      options.mapper_kind = MapperKind::kGlobal;
-    } else if (flags->mapper != "incremental") {
-      throw InvalidArgument(fmt::format("--mapper '{}' is not a mapper; use incremental (the "
-                                        "default) or global",
-                                        flags->mapper));
-    }
-    if (flags->segments > 1) {
-      if (withhold->count() > 0) {
-        throw InvalidArgument("--withhold-loop-pairs does not go with --segments: segments are "
-                              "merged before the loop pairs come in already");
-      }
-    } else if (segment_overlap->count() > 0) {
-      throw InvalidArgument("--segment-overlap is the overlap of --segments: add --segments N "
-                            "(N > 1)");
-    }
-    options.segments.num_segments = flags->segments;
-    options.segments.overlap = flags->segment_overlap;
-    options.segments.sharing = Common().sharing;
+    flags->map.Resolve(&options);
     options.extract = flags->extract.Resolve();
     if (fill_in_rounds->count() > 0 && options.extract.keyframes.mode == KeyframeMode::kWindows) {
       throw InvalidArgument("--fill-in-rounds fills gaps between adaptive keyframes: it cannot be "
                             "combined with fixed windows (--every, --keyframes windows)");
     }
     options.match = flags->match.Resolve();
-    options.mapper.num_threads = Common().threads;
-    if (!flags->refine.empty()) {
-      options.mapper.refine_known = options.mapper.refine_unknown =
-          IntrinsicsRefinement::Parse(flags->refine);
-    }
-    const std::map<std::string, LoopClosingMethod> methods = {
-        {"none", LoopClosingMethod::kNone},
-        {"posegraph", LoopClosingMethod::kPoseGraph},
-        {"split", LoopClosingMethod::kSplit},
-        {"both", LoopClosingMethod::kBoth}};
-    const auto method = methods.find(flags->loop_closing);
-    if (method == methods.end()) {
-      throw InvalidArgument(fmt::format("--loop-closing '{}' is not a method; use posegraph (the "
-                                        "default), split, both or none",
-                                        flags->loop_closing));
-    }
-    options.mapper.loop_closure.method = method->second;
-    options.mapper.loop_closure.withhold_loop_pairs = flags->withhold_loop_pairs;
-    options.mapper.record_alternate_poses = flags->alternate_poses;
-    options.mapper.seed = flags->seed;
     options.overwrite = flags->overwrite;
     if (flags->localized_in_model && !flags->all_frames) {
       throw InvalidArgument("--localized-in-model puts the frames that --all-frames localises "
@@ -378,14 +255,40 @@ void AddReconstructCommand(CLI::App& app) {
     options.all_frames = flags->all_frames;
     options.output.localized_in_model = flags->localized_in_model;
     options.fill_in_rounds = flags->fill_in_rounds;
-    options.checkpoint_interval_seconds = flags->checkpoint_every;
-    options.self_calibrate = !flags->no_self_calibration;
-    options.output.formats = ParseExportFormats(flags->export_formats);
-    options.output.write_text = flags->text;
-    options.groundtruth = flags->groundtruth;
-    options.show_progress = !Common().quiet;
     const ReconstructReport report = Reconstruct(flags->input, flags->output, options);
-    PrintSummary(report);
+    DeliverReport(ToJson(report), SummaryText(report));
+  });
+}
+
+void AddMapCommand(CLI::App& app) {
+  struct Flags {
+    std::string database, output, input;
+    MapFlags map;
+  };
+  auto flags = std::make_shared<Flags>();
+  CLI::App* cmd = app.add_subcommand(
+      "map", "Map a database that extract and match filled: reconstruct's mapping and export "
+             "alone");
+  cmd->add_option("-d,--database", flags->database,
+                  "Database with frames, features and verified pairs (`loopsfm extract`, "
+                  "`loopsfm match`)")
+      ->required()
+      ->check(CLI::ExistingFile);
+  cmd->add_option("-o,--output", flags->output,
+                  "Output folder (sparse/, points.ply, trajectory.txt, ...); mapping resumes from "
+                  "its checkpoint")
+      ->required();
+  cmd->add_option("--input", flags->input,
+                  "The video or image folder the frames came from, for the point colours and "
+                  "the images and gsplat exports (default: the source the database recorded, "
+                  "if it is still there)");
+  AddMapFlags(cmd, &flags->map);
+  cmd->callback([flags] {
+    ReconstructOptions options;
+    flags->map.Resolve(&options);
+    const ReconstructReport report =
+        MapDatabase(flags->database, flags->input, flags->output, options);
+    DeliverReport(ToJson(report), SummaryText(report));
   });
 }
 

@@ -80,6 +80,7 @@ ExtractOptions ExtractFlags::Resolve() const {
   resolved.num_threads = Common().threads;
   resolved.sharing = Common().sharing;
   resolved.show_progress = !Common().quiet;
+  resolved.hooks = Common().hooks;
   if (!intrinsics.empty()) resolved.intrinsics = ReadIntrinsicsFile(intrinsics);
   if (!camera_model.empty()) {
     resolved.camera_model = ParseCameraModel(camera_model);
@@ -173,6 +174,7 @@ MatchOptions MatchFlags::Resolve() const {
   resolved.num_threads = Common().threads;
   resolved.sharing = Common().sharing;
   resolved.show_progress = !Common().quiet;
+  resolved.hooks = Common().hooks;
   resolved.Check();
   return resolved;
 }

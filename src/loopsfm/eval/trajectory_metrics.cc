@@ -409,7 +409,10 @@ nlohmann::json ToJson(const TrajectoryMetrics& m, bool include_frames) {
                                 {"estimated_name", f.estimated_name},
                                 {"gt_index", f.gt_index},
                                 {"position_error", Number(f.position_error)},
-                                {"rotation_error_deg", Number(f.rotation_error_deg)}});
+                                {"rotation_error_deg", Number(f.rotation_error_deg)},
+                                {"aligned_centre",
+                                 {Number(f.aligned_centre.x()), Number(f.aligned_centre.y()),
+                                  Number(f.aligned_centre.z())}}});
     }
   }
   return json;

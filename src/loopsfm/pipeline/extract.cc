@@ -193,7 +193,7 @@ ExtractReport ExtractFeatures(const std::filesystem::path& input, Database& data
   const int expected = mode == KeyframeMode::kAdaptive
                            ? 0
                            : source->Info().expected_frames / options.keyframes.every;
-  Progress progress("extract", expected > 0 ? expected : 0, options.show_progress);
+  Progress progress("extract", expected > 0 ? expected : 0, options.show_progress, options.hooks);
   ExtractReport report;
   // Names of frames stored with features by an earlier run.
   std::unordered_set<std::string> already_extracted;

@@ -17,6 +17,7 @@
 #include "loopsfm/scene/camera.h"
 #include "loopsfm/storage/database.h"
 #include "loopsfm/video/keyframes.h"
+#include "loopsfm/util/progress.h"
 
 namespace loopsfm {
 
@@ -35,6 +36,9 @@ struct ExtractOptions {
   WorkSharing* sharing = nullptr;
   // Show progress on stderr.
   bool show_progress = true;
+  // Who follows the progress and may ask the run to stop (null: nobody); must outlive the
+  // run. The stages of a reconstruction get the reconstruction's.
+  const RunHooks* hooks = nullptr;
   void Check() const;
 };
 

@@ -15,13 +15,15 @@ std::vector<LocalizedFrame> LocalizeSkippedFrames(const std::filesystem::path& i
                                                   const Database& database,
                                                   const std::vector<Reconstruction>& models,
                                                   const FrameLocalizerOptions& options,
-                                                  bool show_progress, LocalizeReport* report) {
+                                                  bool show_progress, const RunHooks* hooks,
+                                                  LocalizeReport* report) {
   Timer timer;
   *report = LocalizeReport();
   std::unordered_map<std::string, image_t> keyframes;
   for (const Frame& frame : database.ReadFrames()) keyframes[frame.name] = frame.image_id;
   std::unique_ptr<FrameSource> source = OpenFrameSource(input);
-  Progress progress("localise", std::max(0, source->Info().expected_frames), show_progress);
+  Progress progress("localise", std::max(0, source->Info().expected_frames), show_progress,
+                    hooks);
   FrameLocalizer localizer(models, options);
   std::vector<LocalizedFrame> localized;
   // The frames since the last keyframe (grey, in their own pixels), for a second try

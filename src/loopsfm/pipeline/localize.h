@@ -12,6 +12,7 @@
 #include "loopsfm/scene/dataset_files.h"
 #include "loopsfm/sfm/frame_localizer.h"
 #include "loopsfm/storage/database.h"
+#include "loopsfm/util/progress.h"
 
 namespace loopsfm {
 
@@ -37,7 +38,8 @@ std::vector<LocalizedFrame> LocalizeSkippedFrames(const std::filesystem::path& i
                                                   const Database& database,
                                                   const std::vector<Reconstruction>& models,
                                                   const FrameLocalizerOptions& options,
-                                                  bool show_progress, LocalizeReport* report);
+                                                  bool show_progress, const RunHooks* hooks,
+                                                  LocalizeReport* report);
 
 // model 0's localised frames as trajectory entries (camera-to-world), in source order.
 std::vector<TrajectoryEntry> LocalizedTrajectory(const std::vector<LocalizedFrame>& frames);

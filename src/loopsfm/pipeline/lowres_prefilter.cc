@@ -43,7 +43,8 @@ void MatchLowResPrefiltered(Database& database, const std::vector<image_t>& orde
   }
   std::vector<char> pass(candidates.size(), 0);
   {
-    Progress progress("prefilter", candidates.size(), options.show_progress && !candidates.empty());
+    Progress progress("prefilter", candidates.size(),
+                      options.show_progress && !candidates.empty(), options.hooks);
     tbb::parallel_for(size_t{0}, candidates.size(), [&](size_t k) {
       const auto matches = MatchDescriptors(small.at(candidates[k].image_id1),
                                             small.at(candidates[k].image_id2), options.matcher);

@@ -216,7 +216,8 @@ std::vector<bool> PairMatcher::Match(const std::vector<ImagePair>& all_pairs, Ma
   WorkSharing& sharing = options_.sharing ? *options_.sharing
                                           : own_sharing.emplace(nullptr, options_.num_threads);
   if (held_.size() != size_t(sharing.NumRanks())) held_.assign(sharing.NumRanks(), std::nullopt);
-  Progress progress("match", todo.size(), options_.show_progress && !todo.empty());
+  Progress progress("match", todo.size(), options_.show_progress && !todo.empty(),
+                    options_.hooks);
   const size_t batch_size = size_t(options_.batch_size) * sharing.NumRanks();
 
   for (size_t begin = 0; begin < todo.size(); begin += batch_size) {

@@ -26,6 +26,7 @@
 #include "loopsfm/pipeline/work_sharing.h"
 #include "loopsfm/storage/database.h"
 #include "loopsfm/tracks/track_builder.h"
+#include "loopsfm/util/progress.h"
 
 namespace loopsfm {
 
@@ -82,6 +83,9 @@ struct MatchOptions {
   uint64_t seed = kDefaultRandomSeed;
   // Show progress on stderr.
   bool show_progress = true;
+  // Who follows the progress and may ask the run to stop (null: nobody); must outlive the
+  // run. The stages of a reconstruction get the reconstruction's.
+  const RunHooks* hooks = nullptr;
   void Check() const;
 };
 

@@ -237,9 +237,152 @@ std::vector<Reconstruction> MapGlobally(const MapperInput& mapper_input,
 
 }  // namespace
 
+namespace {
+
+// What follows matching: mapping (and the fill-in pass around unregistered frames, when the
+// frames' source is known), localisation, export and the report; Reconstruct's work and
+// MapDatabase's. `input` may be empty (the source is unknown).
+void MapAndExport(Database& database, const fs::path& database_path, const fs::path& input,
+                  const fs::path& output_dir, const ReconstructOptions& options,
+                  const std::optional<std::vector<TrajectoryEntry>>& groundtruth,
+                  const Timer& total, ReconstructReport* report) {
+  const fs::path checkpoint_path = output_dir / "mapper_checkpoint.bin";
+  const fs::path segment_checkpoints = output_dir / "segments";
+  Timer stage;
+  // Mapping, and once more when adaptive keyframes left kept frames unregistered (a turn
+  // too fast for the frames kept): in-between frames around them are added first.
+  MapperInput mapper_input;
+  std::vector<Reconstruction> models;
+  const bool adaptive = !input.empty() && options.fill_in_rounds > 0 &&
+                        database.ReadMeta("keyframes").has_value();
+  for (int pass = 0;; ++pass) {
+    ThrowIfStopRequested(options.hooks, pass == 0 ? "match" : "fill-in");
+    stage.Restart();
+    mapper_input = LoadMapperInput(database, &report->tracks);
+    report->stage_times.push_back({pass == 0 ? "tracks" : "tracks-again", stage.ElapsedSeconds()});
+    spdlog::info("tracks: {} (mean length {:.2f}; {} conflicting split, {} matches left out)",
+                 report->tracks.num_tracks, report->tracks.mean_track_length,
+                 report->tracks.num_conflicting_tracks, report->tracks.num_dropped_matches);
+
+    if (options.self_calibrate) {
+      stage.Restart();
+      SelfCalibrationOptions self_calibration = options.self_calibration;
+      self_calibration.verification = options.match.verification;
+      report->self_calibration = SelfCalibrate(self_calibration, &mapper_input);
+      report->stage_times.push_back(
+          {pass == 0 ? "self-calibration" : "self-calibration-again", stage.ElapsedSeconds()});
+    }
+
+    ThrowIfStopRequested(options.hooks, "self-calibration");
+    stage.Restart();
+    if (options.segments.num_segments > 1) {
+      models = MapSegmented(mapper_input, options, segment_checkpoints, pass, report);
+    } else if (options.mapper_kind == MapperKind::kGlobal) {
+      models = MapGlobally(mapper_input, options, pass, report);
+    } else {
+      // The fingerprint digests the whole mapper input: only with checkpoints.
+      std::optional<MapperCheckpointFile> checkpoint;
+      if (options.checkpoint_interval_seconds > 0.0) {
+        checkpoint.emplace(checkpoint_path, mapper_input, options.mapper,
+                           options.checkpoint_interval_seconds);
+      }
+      Progress progress("map", mapper_input.frames.size(), options.show_progress, options.hooks);
+      models = MapWithLoopClosing(mapper_input, options.mapper, &report->mapper,
+                                  [&](size_t registered, size_t) { progress.Set(registered); },
+                                  checkpoint ? checkpoint->checkpointing() : MapperCheckpointing{});
+      report->stage_times.push_back({pass == 0 ? "map" : "map-again", stage.ElapsedSeconds()});
+    }
+    // Once per database: a rerun (which maps the fill-ins from the start) adds no more.
+    if (pass > 0 || !adaptive || database.ReadMeta("fill_in_after_mapping")) break;
+    stage.Restart();
+    int unregistered = 0;
+    const std::vector<int> middles = MiddlesAroundUnregistered(database, models, &unregistered);
+    if (middles.empty()) break;
+    spdlog::info("fill-in: {} kept frame{} not registered; {} in-between frames around them, "
+                 "then mapping again",
+                 unregistered, unregistered == 1 ? " was" : "s were", middles.size());
+    report->fill_in_frames +=
+        ExtractFillInFrames(input, database, options.extract, middles).frames_extracted;
+    MatchPairs(database, options.match);
+    database.WriteMeta("fill_in_after_mapping", std::to_string(middles.size()));
+    report->stage_times.push_back({"fill-in-again", stage.ElapsedSeconds()});
+  }
+  if (models.empty()) {
+    spdlog::warn("no model could be started: no frame pair had enough matches with a wide enough "
+                 "baseline ({} frames, {} verified pairs). 3D needs the camera to move through "
+                 "the scene: a camera that stands still or only turns on the spot gives no "
+                 "baseline. Otherwise try --pairs exhaustive, more frames (--every 1), or "
+                 "--intrinsics",
+                 mapper_input.frames.size(), mapper_input.pairs.size());
+  }
+
+  // A pose for every frame; none from an earlier run is left behind when this one has none.
+  const fs::path localized_path = output_dir / "localized.txt";
+  std::vector<LocalizedFrame> localized;
+  fs::remove(localized_path);
+  if (options.all_frames && !models.empty()) {
+    stage.Restart();
+    localized = LocalizeSkippedFrames(input, database, models, options.localize,
+                                      options.show_progress, options.hooks, &report->localize);
+    report->stage_times.push_back({"localise", stage.ElapsedSeconds()});
+    const LocalizeReport& l = report->localize;
+    spdlog::info("localise: {} of the {} frames between keyframes got a pose ({} did not), "
+                 "{:.1f} ms a frame",
+                 l.localized, l.localized + l.not_localized, l.not_localized,
+                 1000.0 * l.seconds / std::max(1, l.frames_read));
+  }
+
+  stage.Restart();
+  std::vector<std::string> frame_names;
+  for (const MapperFrame& frame : mapper_input.frames) frame_names.push_back(frame.name);
+  report->output = Export(&models, frame_names, input, output_dir, options.output, localized);
+  if (options.all_frames && !models.empty()) {
+    WriteTrajectoryFile(localized_path, LocalizedTrajectory(localized));
+    report->output.written.push_back(localized_path);
+  }
+  report->stage_times.push_back({"export", stage.ElapsedSeconds()});
+  report->total_seconds = total.ElapsedSeconds();
+  report->peak_memory_bytes = PeakResidentBytes();
+  // The frames loop closing tied together, for plots (`loopsfm eval --plot-links`); none
+  // from an earlier run is left behind when this one does not close loops.
+  const fs::path links_path = output_dir / "loop_links.txt";
+  if (options.mapper_kind == MapperKind::kIncremental &&
+      options.mapper.loop_closure.method != LoopClosingMethod::kNone) {
+    WriteLoopLinksFile(links_path, report->mapper.loop_links);
+    report->output.written.push_back(links_path);
+  } else {
+    fs::remove(links_path);
+  }
+  if (options.mapper.record_alternate_poses) {
+    WriteRegistrationRounds(output_dir / "registrations.csv", report->mapper.registrations);
+    report->output.written.push_back(output_dir / "registrations.csv");
+  } else {
+    fs::remove(output_dir / "registrations.csv");
+  }
+  report->timeline = ReadFrameTimeline(database, report->extract.frames_read);
+  for (const LocalizedFrame& frame : localized) {
+    report->timeline.localized.push_back(frame.source_index);
+  }
+  if (options.output.formats.count(ExportFormat::kReport)) {
+    stage.Restart();
+    WriteHtmlReport(output_dir / "report.html",
+                    RunReportData(*report, models, FramesInCaptureOrder(database),
+                                  input.empty() ? database_path : input, output_dir,
+                                  groundtruth));
+    report->output.written.push_back(output_dir / "report.html");
+    report->stage_times.push_back({"report", stage.ElapsedSeconds()});
+    report->total_seconds = total.ElapsedSeconds();
+  }
+}
+
+}  // namespace
+
 ReconstructReport Reconstruct(const fs::path& input, const fs::path& output_dir,
-                              const ReconstructOptions& options) {
-  options.Check();
+                              const ReconstructOptions& given_options) {
+  given_options.Check();
+  // The stages report to the reconstruction's hooks.
+  ReconstructOptions options = given_options;
+  if (options.hooks) options.extract.hooks = options.match.hooks = options.hooks;
   Timer total;
   ReconstructReport report;
   // Refuse a bad input before anything is created.
@@ -276,6 +419,7 @@ ReconstructReport Reconstruct(const fs::path& input, const fs::path& output_dir,
         input.string(), report.num_frames, report.num_frames == 1 ? "" : "s"));
   }
 
+  ThrowIfStopRequested(options.hooks, "extract");
   stage.Restart();
   report.match = MatchPairs(database, options.match);
   report.stage_times.push_back({"match", stage.ElapsedSeconds()});
@@ -292,127 +436,65 @@ ReconstructReport Reconstruct(const fs::path& input, const fs::path& output_dir,
     FillInGaps(input, database, options, &report);
     report.stage_times.push_back({"fill-in", stage.ElapsedSeconds()});
   }
+  MapAndExport(database, database_path, input, output_dir, options, groundtruth, total, &report);
+  return report;
+}
 
-  // Mapping, and once more when adaptive keyframes left kept frames unregistered (a turn
-  // too fast for the frames kept): in-between frames around them are added first.
-  MapperInput mapper_input;
-  std::vector<Reconstruction> models;
-  const bool adaptive = options.fill_in_rounds > 0 && database.ReadMeta("keyframes").has_value();
-  for (int pass = 0;; ++pass) {
-    stage.Restart();
-    mapper_input = LoadMapperInput(database, &report.tracks);
-    report.stage_times.push_back({pass == 0 ? "tracks" : "tracks-again", stage.ElapsedSeconds()});
-    spdlog::info("tracks: {} (mean length {:.2f}; {} conflicting split, {} matches left out)",
-                 report.tracks.num_tracks, report.tracks.mean_track_length,
-                 report.tracks.num_conflicting_tracks, report.tracks.num_dropped_matches);
-
-    if (options.self_calibrate) {
-      stage.Restart();
-      SelfCalibrationOptions self_calibration = options.self_calibration;
-      self_calibration.verification = options.match.verification;
-      report.self_calibration = SelfCalibrate(self_calibration, &mapper_input);
-      report.stage_times.push_back(
-          {pass == 0 ? "self-calibration" : "self-calibration-again", stage.ElapsedSeconds()});
-    }
-
-    stage.Restart();
-    if (options.segments.num_segments > 1) {
-      models = MapSegmented(mapper_input, options, segment_checkpoints, pass, &report);
-    } else if (options.mapper_kind == MapperKind::kGlobal) {
-      models = MapGlobally(mapper_input, options, pass, &report);
-    } else {
-      // The fingerprint digests the whole mapper input: only with checkpoints.
-      std::optional<MapperCheckpointFile> checkpoint;
-      if (options.checkpoint_interval_seconds > 0.0) {
-        checkpoint.emplace(checkpoint_path, mapper_input, options.mapper,
-                           options.checkpoint_interval_seconds);
+ReconstructReport MapDatabase(const fs::path& database_path, const fs::path& input,
+                              const fs::path& output_dir, const ReconstructOptions& given_options) {
+  given_options.Check();
+  ReconstructOptions options = given_options;
+  Timer total;
+  ReconstructReport report;
+  // Refuse what cannot be done before anything is created.
+  if (!fs::is_regular_file(database_path)) {
+    throw InputError(fmt::format("database '{}' does not exist; make it with `loopsfm extract "
+                                 "INPUT -d {}` and `loopsfm match -d {}`",
+                                 database_path.string(), database_path.string(),
+                                 database_path.string()));
+  }
+  if (!input.empty()) OpenFrameSource(input);
+  std::optional<std::vector<TrajectoryEntry>> groundtruth;
+  if (!options.groundtruth.empty()) groundtruth = ReadTrajectoryFile(options.groundtruth);
+  Database database = Database::Open(database_path.string());
+  fs::path source = input;
+  if (source.empty()) {
+    const std::optional<std::string> recorded = database.ReadMeta("source_path");
+    if (recorded && fs::exists(*recorded)) source = *recorded;
+  }
+  if (source.empty()) {
+    for (ExportFormat format : {ExportFormat::kImages, ExportFormat::kGsplat}) {
+      if (options.output.formats.count(format)) {
+        throw InvalidArgument(fmt::format(
+            "--export {} writes the frames, and the database records no source that is still "
+            "there: pass the video or folder with --input, or leave {} out (e.g. --export "
+            "colmap,ply,tum,nerfstudio,report)",
+            ExportFormatName(format), ExportFormatName(format)));
       }
-      Progress progress("map", mapper_input.frames.size(), options.show_progress);
-      models = MapWithLoopClosing(mapper_input, options.mapper, &report.mapper,
-                                  [&](size_t, size_t) { progress.Advance(); },
-                                  checkpoint ? checkpoint->checkpointing() : MapperCheckpointing{});
-      report.stage_times.push_back({pass == 0 ? "map" : "map-again", stage.ElapsedSeconds()});
     }
-    // Once per database: a rerun (which maps the fill-ins from the start) adds no more.
-    if (pass > 0 || !adaptive || database.ReadMeta("fill_in_after_mapping")) break;
-    stage.Restart();
-    int unregistered = 0;
-    const std::vector<int> middles = MiddlesAroundUnregistered(database, models, &unregistered);
-    if (middles.empty()) break;
-    spdlog::info("fill-in: {} kept frame{} not registered; {} in-between frames around them, "
-                 "then mapping again",
-                 unregistered, unregistered == 1 ? " was" : "s were", middles.size());
-    report.fill_in_frames +=
-        ExtractFillInFrames(input, database, options.extract, middles).frames_extracted;
-    MatchPairs(database, options.match);
-    database.WriteMeta("fill_in_after_mapping", std::to_string(middles.size()));
-    report.stage_times.push_back({"fill-in-again", stage.ElapsedSeconds()});
+    if (options.all_frames) {
+      throw InvalidArgument("all frames need the video: pass it with --input");
+    }
+    options.output.colorize = false;
+    spdlog::warn("the frames' source is unknown (pass it with --input): the points are not "
+                 "coloured");
   }
-  if (models.empty()) {
-    spdlog::warn("no model could be started: no frame pair had enough matches with a wide enough "
-                 "baseline ({} frames, {} verified pairs). 3D needs the camera to move through "
-                 "the scene: a camera that stands still or only turns on the spot gives no "
-                 "baseline. Otherwise try --pairs exhaustive, more frames (--every 1), or "
-                 "--intrinsics",
-                 mapper_input.frames.size(), mapper_input.pairs.size());
+  report.num_frames = database.NumFrames();
+  if (report.num_frames < 2) {
+    throw InputError(fmt::format("database '{}' holds {} frame{}: fill it with `loopsfm extract` "
+                                 "and `loopsfm match` first",
+                                 database_path.string(), report.num_frames,
+                                 report.num_frames == 1 ? "" : "s"));
   }
-
-  // A pose for every frame; none from an earlier run is left behind when this one has none.
-  const fs::path localized_path = output_dir / "localized.txt";
-  std::vector<LocalizedFrame> localized;
-  fs::remove(localized_path);
-  if (options.all_frames && !models.empty()) {
-    stage.Restart();
-    localized = LocalizeSkippedFrames(input, database, models, options.localize,
-                                      options.show_progress, &report.localize);
-    report.stage_times.push_back({"localise", stage.ElapsedSeconds()});
-    const LocalizeReport& l = report.localize;
-    spdlog::info("localise: {} of the {} frames between keyframes got a pose ({} did not), "
-                 "{:.1f} ms a frame",
-                 l.localized, l.localized + l.not_localized, l.not_localized,
-                 1000.0 * l.seconds / std::max(1, l.frames_read));
+  std::error_code ec;
+  fs::create_directories(output_dir, ec);
+  if (ec || !fs::is_directory(output_dir)) {
+    throw StorageError(fmt::format("cannot create output folder '{}': {}", output_dir.string(),
+                                   ec ? ec.message() : "a file of that name exists"));
   }
-
-  stage.Restart();
-  std::vector<std::string> frame_names;
-  for (const MapperFrame& frame : mapper_input.frames) frame_names.push_back(frame.name);
-  report.output = Export(&models, frame_names, input, output_dir, options.output, localized);
-  if (options.all_frames && !models.empty()) {
-    WriteTrajectoryFile(localized_path, LocalizedTrajectory(localized));
-    report.output.written.push_back(localized_path);
-  }
-  report.stage_times.push_back({"export", stage.ElapsedSeconds()});
-  report.total_seconds = total.ElapsedSeconds();
-  report.peak_memory_bytes = PeakResidentBytes();
-  // The frames loop closing tied together, for plots (`loopsfm eval --plot-links`); none
-  // from an earlier run is left behind when this one does not close loops.
-  const fs::path links_path = output_dir / "loop_links.txt";
-  if (options.mapper_kind == MapperKind::kIncremental &&
-      options.mapper.loop_closure.method != LoopClosingMethod::kNone) {
-    WriteLoopLinksFile(links_path, report.mapper.loop_links);
-    report.output.written.push_back(links_path);
-  } else {
-    fs::remove(links_path);
-  }
-  if (options.mapper.record_alternate_poses) {
-    WriteRegistrationRounds(output_dir / "registrations.csv", report.mapper.registrations);
-    report.output.written.push_back(output_dir / "registrations.csv");
-  } else {
-    fs::remove(output_dir / "registrations.csv");
-  }
-  report.timeline = ReadFrameTimeline(database, report.extract.frames_read);
-  for (const LocalizedFrame& frame : localized) {
-    report.timeline.localized.push_back(frame.source_index);
-  }
-  if (options.output.formats.count(ExportFormat::kReport)) {
-    stage.Restart();
-    WriteHtmlReport(output_dir / "report.html",
-                    RunReportData(report, models, FramesInCaptureOrder(database), input,
-                                  output_dir, groundtruth));
-    report.output.written.push_back(output_dir / "report.html");
-    report.stage_times.push_back({"report", stage.ElapsedSeconds()});
-    report.total_seconds = total.ElapsedSeconds();
-  }
+  // Mapping only: no frames are added to the database.
+  options.fill_in_rounds = 0;
+  MapAndExport(database, database_path, source, output_dir, options, groundtruth, total, &report);
   return report;
 }
 

@@ -21,6 +21,7 @@
 #include "loopsfm/sfm/global_mapper.h"
 #include "loopsfm/sfm/incremental_mapper.h"
 #include "loopsfm/sfm/self_calibration.h"
+#include "loopsfm/util/progress.h"
 
 namespace loopsfm {
 
@@ -63,6 +64,9 @@ struct ReconstructOptions {
   double checkpoint_interval_seconds = 60.0;
   // Show progress on stderr.
   bool show_progress = true;
+  // Who follows the progress and may ask the run to stop (null: nobody); must outlive the
+  // run. The stages of a reconstruction get the reconstruction's.
+  const RunHooks* hooks = nullptr;
   void Check() const;
 };
 
@@ -112,6 +116,21 @@ struct ReconstructReport {
 ReconstructReport Reconstruct(const std::filesystem::path& input,
                               const std::filesystem::path& output_dir,
                               const ReconstructOptions& options);
+
+// Reconstruct's mapping, localisation and export on a database that extract and match filled,
+// into `output_dir` (which may hold the database or not). `input` is the video or folder the
+// frames came from; empty: the source the database recorded, if it is still there. Without a
+// source, the points are not coloured, and all_frames, fill-in frames after mapping and the
+// formats that need the frames (images, gsplat) are refused. options.extract, .match and
+// .overwrite are not used.
+ReconstructReport MapDatabase(const std::filesystem::path& database_path,
+                              const std::filesystem::path& input,
+                              const std::filesystem::path& output_dir,
+                              const ReconstructOptions& options);
+
+// The report as JSON: counts, each model's summary and cameras, what was written, stage times
+// (reconstruct_json.cc).
+nlohmann::json ToJson(const ReconstructReport& report);
 
 // The fill-in rounds of ReconstructOptions::fill_in_rounds on a matched database: extract
 // and match the middle frame of each gap between consecutive kept frames that have no

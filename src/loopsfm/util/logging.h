@@ -8,7 +8,8 @@ namespace loopsfm {
 
 enum class Verbosity { kQuiet, kNormal, kVerbose };
 
-// Sends log lines to stderr with a short "[level] message" pattern.
+// Sends log lines to stderr with a short "[level] message" pattern, at the given level; may be
+// called again to change the level.
 void SetupLogging(Verbosity verbosity);
 
 }  // namespace loopsfm

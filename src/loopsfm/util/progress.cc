@@ -4,20 +4,55 @@
 
 #include <cstdio>
 
-namespace loopsfm {
+#include "loopsfm/util/errors.h"
 
-Progress::Progress(std::string stage, size_t total, bool enabled)
-    : stage_(std::move(stage)), total_(total), enabled_(enabled), tty_(isatty(STDERR_FILENO)) {}
+namespace loopsfm {
+namespace {
+
+// Seconds between calls of RunHooks::progress (and polls of stop_requested) per stage.
+constexpr double kHookInterval = 0.2;
+
+}  // namespace
+
+void ThrowIfStopRequested(const RunHooks* hooks, const std::string& where) {
+  if (hooks && hooks->stop_requested && hooks->stop_requested()) {
+    throw Cancelled(fmt::format("asked to stop during {}; what was stored stays, and running "
+                                "the same command again goes on from there",
+                                where));
+  }
+}
+
+Progress::Progress(std::string stage, size_t total, bool enabled, const RunHooks* hooks)
+    : stage_(std::move(stage)),
+      total_(total),
+      enabled_(enabled),
+      hooks_(hooks),
+      tty_(isatty(STDERR_FILENO)) {}
 
 Progress::~Progress() { Finish(); }
 
 void Progress::Advance(size_t n) {
   count_ += n;
-  if (!enabled_) return;
-  const double interval = tty_ ? 0.1 : 5.0;
+  Show();
+}
+
+void Progress::Set(size_t count) {
+  count_ = count;
+  Show();
+}
+
+void Progress::Show() {
+  if (!enabled_ && !hooks_) return;
   std::unique_lock lock(mutex_, std::try_to_lock);
   if (!lock.owns_lock() || finished_) return;
-  if (timer_.ElapsedSeconds() - last_draw_ >= interval) Draw(false);
+  const double now = timer_.ElapsedSeconds();
+  if (enabled_ && now - last_draw_ >= (tty_ ? 0.1 : 5.0)) Draw(false);
+  if (hooks_ && now - last_hook_ >= kHookInterval) {
+    last_hook_ = now;
+    if (hooks_->progress) hooks_->progress(stage_, count_.load(), total_);
+    lock.unlock();
+    ThrowIfStopRequested(hooks_, stage_);
+  }
 }
 
 void Progress::Finish() {
@@ -25,6 +60,7 @@ void Progress::Finish() {
   if (finished_) return;
   finished_ = true;
   if (enabled_) Draw(true);
+  if (hooks_ && hooks_->progress) hooks_->progress(stage_, count_.load(), total_);
 }
 
 void Progress::Draw(bool final_line) {
