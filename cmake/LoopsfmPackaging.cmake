@@ -6,6 +6,9 @@
 # and python3-numpy is added for the module. Build it from a tree configured with
 # -DLOOPSFM_NATIVE=OFF, so it runs on any x86-64 (the matching kernels are chosen at run time).
 include(GNUInstallDirs)
+# `install` and cpack take the program and the module as built (scripts/package builds those
+# two), instead of building every test and benchmark first.
+set(CMAKE_SKIP_INSTALL_ALL_DEPENDENCY ON)
 install(TARGETS loopsfm RUNTIME DESTINATION ${CMAKE_INSTALL_BINDIR})
 install(FILES README.md DESTINATION ${CMAKE_INSTALL_DOCDIR})
 if(loopsfm_python)
@@ -22,7 +25,7 @@ set(CPACK_PACKAGE_VERSION ${PROJECT_VERSION})
 set(CPACK_PACKAGE_CONTACT "loopsfm developers <loopsfm@localhost>")
 set(CPACK_PACKAGE_DESCRIPTION_SUMMARY
     "camera poses and a sparse 3D point cloud from video, with loop closing")
-set(CPACK_PACKAGE_DESCRIPTION
+string(CONCAT CPACK_PACKAGE_DESCRIPTION
     "loopsfm turns a video or an ordered image folder into camera poses and a sparse point "
     "cloud (COLMAP models, PLY, trajectories, nerfstudio and Gaussian-splatting layouts, an HTML "
     "report), finding where the camera returns with a vocabulary tree and closing the loops. "

@@ -6,6 +6,7 @@ program built beside it.
 
 import json
 import os
+import shutil
 import signal
 import subprocess
 from pathlib import Path
@@ -87,6 +88,21 @@ def test_model_arrays_are_consistent(scene, python_run):
     # The text model holds the same frames and poses.
     text = loopsfm.read_model(python_run[0] / "sparse" / "0")
     assert text.names == model.names
+
+
+@pytest.mark.skipif(shutil.which("colmap") is None, reason="COLMAP 3.8 (Debian's colmap) absent")
+def test_reads_a_model_that_colmap_wrote(python_run, tmp_path):
+    """COLMAP's model_converter rewrites our model as text: read back, it is the same model
+    (to the digits COLMAP's text keeps)."""
+    converted = subprocess.run(
+        ["colmap", "model_converter", "--input_path", python_run[0] / "sparse" / "0",
+         "--output_path", tmp_path, "--output_type", "TXT"], capture_output=True, text=True)
+    assert converted.returncode == 0, converted.stderr
+    ours, colmaps = loopsfm.read_model(python_run[0]), loopsfm.read_model(tmp_path)
+    assert colmaps.names == ours.names
+    assert np.allclose(colmaps.poses, ours.poses, atol=1e-9)
+    assert np.allclose(colmaps.xyz, ours.xyz, rtol=1e-9)
+    assert np.array_equal(colmaps.track_length, ours.track_length)
 
 
 def test_evaluate_agrees_with_the_program_and_the_path_is_accurate(scene, python_run):

@@ -3,6 +3,7 @@
 #include <unistd.h>
 
 #include <cstdio>
+#include <exception>
 
 #include "loopsfm/util/errors.h"
 
@@ -27,9 +28,10 @@ Progress::Progress(std::string stage, size_t total, bool enabled, const RunHooks
       total_(total),
       enabled_(enabled),
       hooks_(hooks),
-      tty_(isatty(STDERR_FILENO)) {}
+      tty_(isatty(STDERR_FILENO)),
+      uncaught_at_start_(std::uncaught_exceptions()) {}
 
-Progress::~Progress() { Finish(); }
+Progress::~Progress() { Finish(std::uncaught_exceptions() > uncaught_at_start_); }
 
 void Progress::Advance(size_t n) {
   count_ += n;
@@ -55,11 +57,15 @@ void Progress::Show() {
   }
 }
 
-void Progress::Finish() {
+void Progress::Finish() { Finish(false); }
+
+void Progress::Finish(bool stopped) {
   std::lock_guard lock(mutex_);
   if (finished_) return;
   finished_ = true;
+  stopped_ = stopped;
   if (enabled_) Draw(true);
+  if (stopped) return;
   if (hooks_ && hooks_->progress) hooks_->progress(stage_, count_.load(), total_);
 }
 
@@ -80,7 +86,7 @@ void Progress::Draw(bool final_line) {
   } else {
     std::fprintf(stderr, "%s: %zu%s%s done, %.1f/s, %.1fs%s\n", stage_.c_str(), count,
                  total_ > 0 ? " of " : "", total_ > 0 ? std::to_string(total_).c_str() : "", rate,
-                 last_draw_, final_line ? " (finished)" : "");
+                 last_draw_, final_line ? (stopped_ ? " (stopped)" : " (finished)") : "");
   }
   std::fflush(stderr);
 }

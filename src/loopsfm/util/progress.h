@@ -41,7 +41,8 @@ class Progress {
   void Advance(size_t n = 1);
   // Sets the count (for stages that know it, not its steps); throws as Advance.
   void Set(size_t count);
-  // Draws the final state and a newline. Called by the destructor if not called before.
+  // Draws the final state and a newline. Called by the destructor if not called before; there,
+  // while an exception (a stop, an error) unwinds the stage, the line says it stopped.
   void Finish();
   size_t Count() const { return count_.load(); }
 
@@ -49,6 +50,7 @@ class Progress {
   // Draws and calls the hooks when it is time; throws Cancelled when they ask to stop.
   void Show();
   void Draw(bool final_line);
+  void Finish(bool stopped);
 
   std::string stage_;
   size_t total_;
@@ -61,6 +63,9 @@ class Progress {
   double last_draw_ = -1e9;
   double last_hook_ = -1e9;
   bool finished_ = false;
+  // Exceptions in flight when the stage began (std::uncaught_exceptions).
+  int uncaught_at_start_ = 0;
+  bool stopped_ = false;
 };
 
 }  // namespace loopsfm
