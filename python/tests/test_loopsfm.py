@@ -183,6 +183,9 @@ def test_stages_one_at_a_time(scene, tmp_path):
     extracted = loopsfm.extract(scene / "video.mp4", database, every=1, quiet=True,
                                 intrinsics=scene / "intrinsics.txt")
     assert extracted["frames_extracted"] == 36
+    with pytest.raises(loopsfm.InputError, match="loopsfm match"):
+        loopsfm.map(database, tmp_path / "out")
+    assert not (tmp_path / "out").exists()
     matched = loopsfm.match(database, pairs="sequential", quiet=True)
     assert matched["num_pairs_verified"] > 36
     mapped = loopsfm.map(database, tmp_path / "out", quiet=True)

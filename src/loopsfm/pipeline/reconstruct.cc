@@ -457,6 +457,14 @@ ReconstructReport MapDatabase(const fs::path& database_path, const fs::path& inp
   std::optional<std::vector<TrajectoryEntry>> groundtruth;
   if (!options.groundtruth.empty()) groundtruth = ReadTrajectoryFile(options.groundtruth);
   Database database = Database::Open(database_path.string());
+  if (!database.ReadMeta("match_fingerprint")) {
+    throw InputError(fmt::format(
+        "database '{}' holds no pairs that `loopsfm match` verified (the mapper starts from the "
+        "two-view geometry that loopsfm's verification stores; from a database that COLMAP "
+        "matched it starts no model): run `loopsfm match -d {}` first, or for a COLMAP "
+        "database, `loopsfm extract` and `loopsfm match` on its images",
+        database_path.string(), database_path.string()));
+  }
   fs::path source = input;
   if (source.empty()) {
     const std::optional<std::string> recorded = database.ReadMeta("source_path");
