@@ -3,9 +3,8 @@
 // point correspondences of its verified image pairs (before any mapping), so that a lens that
 // bends straight lines (an action camera, a wide phone lens) does not throw off the focal
 // length estimated from fundamental matrices (focal_estimation.h): the pairs' F, fitted to
-// distorted points, otherwise vote for focal lengths that scatter and miss (measured on
-// synthetic streets: k = -0.12 at f = 576 px gave a vote of 711 px that scattered too much to
-// be used; k = -0.07 at f = 288 px gave 333.7 px, 16 % long, and was used).
+// distorted points, otherwise vote for focal lengths that scatter and miss (docs/benchmarks.md,
+// "Intrinsics and self-calibration").
 //
 // Model. SIMPLE_RADIAL's radial term in pixels about the principal point c, in units of s =
 // half the image diagonal:

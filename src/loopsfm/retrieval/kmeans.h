@@ -59,8 +59,8 @@ inline float SquaredNorm128(const float* a) { return Dot128(a, a); }
 // (|x|^2 is common to all; squared_norms from SquaredNorm128); ties go to the lower index.
 // Shared by training and quantisation, so that both send a descriptor to the same centre.
 // Fixed-size Eigen expressions: the summation order does not depend on memory alignment.
-// (Measured: a transposed layout with 16 centres per vector register was 1.5-2.5x slower
-// than these independent dot products.)
+// Independent dot products beat a transposed layout of 16 centres per vector register
+// (docs/benchmarks.md, "Vocabulary tree").
 inline int NearestCentre(const float* x, const float* centres, const float* squared_norms,
                          int num) {
   int best = 0;

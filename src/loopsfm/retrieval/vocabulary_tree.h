@@ -20,12 +20,11 @@
 
 namespace loopsfm {
 
-// Defaults measured with bench/retrieval/retrieval_study on real sequences (block: 440 frames,
-// 1M descriptors; templeRing; KITTI 07): quality grows with the number of words up to a few
-// descriptors per word, and at a given training sample a broader tree does better: 64 x 3
-// (~250k words from 500k descriptors) retrieves 1-2 points more temporal neighbours than
-// 10 x 5 or 16 x 4 (~65-100k words), for about twice the training time and three times the
-// quantisation time. The number of Lloyd iterations barely matters (3 to 20 within noise).
+// Defaults chosen with bench/retrieval/retrieval_study on real sequences: retrieval improves
+// with the number of words up to a few descriptors per word, and for a given training sample a
+// broad, shallow tree retrieves more temporal neighbours than a narrow, deep one, at a higher
+// training and quantisation cost; the number of Lloyd iterations barely matters (figures:
+// docs/benchmarks.md, "Vocabulary tree").
 struct VocabTreeOptions {
   // Branching factor k: number of children of each inner node.
   int branching = 64;

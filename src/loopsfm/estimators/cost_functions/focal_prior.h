@@ -6,7 +6,7 @@
 // Why. Along a straight walk past a facade, f and the depths trade off exactly (the images of
 // a plane under a translation parallel to it only shift, by f t / Z), so the reprojection
 // errors leave f free in that direction and Levenberg-Marquardt can walk it anywhere, even to
-// a few pixels (measured on a 300-frame synthetic street with k1 = -0.15: f 864 -> 3.6 px).
+// a few pixels (docs/benchmarks.md, "Intrinsics and self-calibration").
 // Where the frames constrain f (turns), tens of thousands of reprojection residuals outweigh
 // this one term; where they do not, it holds f at the estimate.
 //
