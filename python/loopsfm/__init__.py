@@ -31,10 +31,11 @@ import numpy as np
 from . import _loopsfm
 from ._loopsfm import Cancelled, Error, InputError, InvalidArgument, StorageError
 
+# `map` and `help` stay out of `from loopsfm import *`: they would hide Python's own.
 __all__ = [
     "Cancelled", "Error", "InputError", "InvalidArgument", "StorageError", "Model",
-    "reconstruct", "extract", "match", "map", "evaluate", "export", "synth", "read_model", "run",
-    "help", "version",
+    "reconstruct", "extract", "match", "evaluate", "export", "synth", "read_model", "run",
+    "version",
 ]
 __version__ = "0.1.0"
 
