@@ -223,8 +223,9 @@ std::vector<Reconstruction> MapGlobally(const MapperInput& mapper_input,
   report->global_mapper.emplace();
   GlobalMapperOptions global_options = options.global_mapper;
   global_options.verification = options.match.verification;
-  std::vector<Reconstruction> models = RunGlobalMapper(
-      mapper_input, options.mapper, global_options, &*report->global_mapper, &report->mapper);
+  std::vector<Reconstruction> models =
+      RunGlobalMapper(mapper_input, options.mapper, global_options, &*report->global_mapper,
+                      &report->mapper, options.hooks);
   const GlobalMapperReport& g = *report->global_mapper;
   const std::string suffix = pass == 0 ? "" : " (again)";
   report->stage_times.push_back({"map: view graph" + suffix, g.seconds_view_graph});

@@ -358,7 +358,7 @@ std::optional<Reconstruction> BuildModel(const MapperInput& input,
                                          const IncrementalMapperOptions& mapper_options,
                                          const GlobalMapperOptions& options,
                                          const std::map<image_t, Rigid3d>& poses,
-                                         GlobalMapperReport* report,
+                                         const RunHooks* hooks, GlobalMapperReport* report,
                                          MapperReport* mapper_report) {
   Timer timer;
   IncrementalMapperOptions loose_options = mapper_options;
@@ -368,6 +368,7 @@ std::optional<Reconstruction> BuildModel(const MapperInput& input,
   report->seconds_triangulation += timer.ElapsedSeconds();
   timer.Restart();
   for (int round = 0; round < options.num_loose_rounds; ++round) {
+    ThrowIfStopRequested(hooks, "global mapping (bundles)");
     loose.GlobalRefinement(mapper_report);
   }
   report->seconds_bundles += timer.ElapsedSeconds();
@@ -380,6 +381,7 @@ std::optional<Reconstruction> BuildModel(const MapperInput& input,
   report->seconds_triangulation += timer.ElapsedSeconds();
   timer.Restart();
   for (int round = 0; round < options.num_refinement_rounds; ++round) {
+    ThrowIfStopRequested(hooks, "global mapping (bundles)");
     state.GlobalRefinement(mapper_report);
   }
   const int dropped = DropWeakFrames(ordered, options.min_frame_points, &state);
@@ -400,7 +402,7 @@ std::optional<Reconstruction> MapComponent(const MapperInput& input, const Frame
                                            const GlobalMapperOptions& options,
                                            const std::vector<PairPose>& pair_poses,
                                            const Rotations& rotations, bool first,
-                                           GlobalMapperReport* report,
+                                           const RunHooks* hooks, GlobalMapperReport* report,
                                            MapperReport* mapper_report) {
   Timer timer;
   int num_tracks = 0;
@@ -425,8 +427,9 @@ std::optional<Reconstruction> MapComponent(const MapperInput& input, const Frame
                  rotations.size(), positioned.report.termination);
     return std::nullopt;
   }
+  ThrowIfStopRequested(hooks, "global mapping (positions)");
   return BuildModel(input, mapper_options, options,
-                    CamFromWorldFromCentres(rotations, positioned.camera_centres), report,
+                    CamFromWorldFromCentres(rotations, positioned.camera_centres), hooks, report,
                     mapper_report);
 }
 
@@ -436,7 +439,7 @@ std::vector<Reconstruction> RunGlobalMapper(const MapperInput& input,
                                             const IncrementalMapperOptions& mapper_options,
                                             const GlobalMapperOptions& options,
                                             GlobalMapperReport* report,
-                                            MapperReport* mapper_report) {
+                                            MapperReport* mapper_report, const RunHooks* hooks) {
   mapper_options.Check();
   options.Check();
   GlobalMapperReport local_report;
@@ -452,11 +455,13 @@ std::vector<Reconstruction> RunGlobalMapper(const MapperInput& input,
       CleanedComponents(pair_poses, options, mapper_options, report);
   std::vector<Reconstruction> models;
   for (size_t c = 0; c < components.size(); ++c) {
+    ThrowIfStopRequested(hooks, "global mapping (view graph)");
     const Rotations rotations = AverageComponent(components[c], options, c == 0, report);
+    ThrowIfStopRequested(hooks, "global mapping (rotations)");
     if (rotations.size() < 2) continue;
     std::optional<Reconstruction> model =
         MapComponent(input, lookup, mapper_options, options, pair_poses, rotations, c == 0,
-                     report, mapper_report);
+                     hooks, report, mapper_report);
     if (model) models.push_back(std::move(*model));
   }
   if (models.empty()) {

@@ -28,17 +28,21 @@
 #include "loopsfm/sfm/mapper_input.h"
 #include "loopsfm/sfm/mapper_options.h"
 #include "loopsfm/sfm/mapper_report.h"
+#include "loopsfm/util/progress.h"
 
 namespace loopsfm {
 
 // A model per connected component of the cleaned view graph with at least the mapper
 // options' min_model_size frames (at most max_num_models), largest first; none for a
 // component where a stage fails (the log says which). `mapper_report` gets the bundle
-// counts and times as the incremental mapper reports them.
+// counts and times as the incremental mapper reports them. `hooks` (may be null) are polled
+// between the stages and the bundle rounds: a stop throws Cancelled, and the mapping is lost
+// (the global mapper has no checkpoints).
 std::vector<Reconstruction> RunGlobalMapper(const MapperInput& input,
                                             const IncrementalMapperOptions& mapper_options,
                                             const GlobalMapperOptions& options,
                                             GlobalMapperReport* report,
-                                            MapperReport* mapper_report);
+                                            MapperReport* mapper_report,
+                                            const RunHooks* hooks = nullptr);
 
 }  // namespace loopsfm

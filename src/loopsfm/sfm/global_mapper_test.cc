@@ -125,6 +125,30 @@ TEST(GlobalMapper, PartsSmallerThanAModelOrBeyondTheLimitAreLeftOut) {
   EXPECT_GT(report.view_graph.num_dropped_outside_component, 0);
 }
 
+// A stop asked while mapping (Ctrl-C) ends the mapping at the next stage with Cancelled; the
+// hooks are polled between every stage.
+TEST(GlobalMapper, StopsAtTheNextStageWhenAsked) {
+  const MapperProblem p = NoisyWalkBack(0.5, 0);
+  for (int stop_at_poll : {1, 3, 5}) {
+    int polls = 0;
+    RunHooks hooks;
+    hooks.stop_requested = [&] { return ++polls >= stop_at_poll; };
+    EXPECT_THROW(RunGlobalMapper(p.input, OneThread(), GlobalMapperOptions(), nullptr, nullptr,
+                                 &hooks),
+                 Cancelled)
+        << "stop at poll " << stop_at_poll;
+    EXPECT_EQ(polls, stop_at_poll);
+  }
+  int polls = 0;
+  RunHooks counting;
+  counting.stop_requested = [&] { return ++polls < 0; };
+  EXPECT_EQ(RunGlobalMapper(p.input, OneThread(), GlobalMapperOptions(), nullptr, nullptr,
+                            &counting)
+                .size(),
+            1u);
+  EXPECT_EQ(polls, 5);  // view graph, rotations, positions, one loose and one refining bundle
+}
+
 TEST(GlobalMapper, OptionsAreChecked) {
   GlobalMapperOptions options;
   options.max_rotation_error_deg = 0.0;
