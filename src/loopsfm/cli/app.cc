@@ -75,6 +75,10 @@ void AddCommands(CLI::App& app, WorkSharing* sharing, const std::string& allocat
 
 nlohmann::json RunCommand(const std::vector<std::string>& args, const RunHooks* hooks) {
   std::lock_guard<std::mutex> lock(CommandMutex());
+  // The global flags point at this call's hooks and report: reset however the call ends.
+  struct ResetCommon {
+    ~ResetCommon() { Common() = CommonFlags(); }
+  } reset;
   Common() = CommonFlags();
   CLI::App app;
   AddCommands(app, nullptr, kLibcMalloc);
@@ -86,13 +90,8 @@ nlohmann::json RunCommand(const std::vector<std::string>& args, const RunHooks* 
   try {
     app.parse(reversed);
   } catch (const CLI::ParseError& e) {
-    Common() = CommonFlags();
     throw InvalidArgument(e.what());
-  } catch (...) {
-    Common() = CommonFlags();
-    throw;
   }
-  Common() = CommonFlags();
   return report;
 }
 

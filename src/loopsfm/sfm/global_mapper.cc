@@ -453,9 +453,9 @@ std::vector<Reconstruction> RunGlobalMapper(const MapperInput& input,
   const std::vector<PairPose> pair_poses = PairPoses(input, lookup, options);
   const std::vector<std::vector<RelativeRotation>> components =
       CleanedComponents(pair_poses, options, mapper_options, report);
+  ThrowIfStopRequested(hooks, "global mapping (view graph)");
   std::vector<Reconstruction> models;
   for (size_t c = 0; c < components.size(); ++c) {
-    ThrowIfStopRequested(hooks, "global mapping (view graph)");
     const Rotations rotations = AverageComponent(components[c], options, c == 0, report);
     ThrowIfStopRequested(hooks, "global mapping (rotations)");
     if (rotations.size() < 2) continue;

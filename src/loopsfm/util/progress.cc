@@ -63,13 +63,12 @@ void Progress::Finish(bool stopped) {
   std::lock_guard lock(mutex_);
   if (finished_) return;
   finished_ = true;
-  stopped_ = stopped;
-  if (enabled_) Draw(true);
+  if (enabled_) Draw(true, stopped);
   if (stopped) return;
   if (hooks_ && hooks_->progress) hooks_->progress(stage_, count_.load(), total_);
 }
 
-void Progress::Draw(bool final_line) {
+void Progress::Draw(bool final_line, bool stopped) {
   last_draw_ = timer_.ElapsedSeconds();
   const size_t count = count_.load();
   const double rate = last_draw_ > 0 ? count / last_draw_ : 0.0;
@@ -86,7 +85,7 @@ void Progress::Draw(bool final_line) {
   } else {
     std::fprintf(stderr, "%s: %zu%s%s done, %.1f/s, %.1fs%s\n", stage_.c_str(), count,
                  total_ > 0 ? " of " : "", total_ > 0 ? std::to_string(total_).c_str() : "", rate,
-                 last_draw_, final_line ? (stopped_ ? " (stopped)" : " (finished)") : "");
+                 last_draw_, final_line ? (stopped ? " (stopped)" : " (finished)") : "");
   }
   std::fflush(stderr);
 }

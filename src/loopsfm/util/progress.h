@@ -49,7 +49,8 @@ class Progress {
  private:
   // Draws and calls the hooks when it is time; throws Cancelled when they ask to stop.
   void Show();
-  void Draw(bool final_line);
+  // `stopped`: the final line says the stage stopped instead of finishing.
+  void Draw(bool final_line, bool stopped = false);
   void Finish(bool stopped);
 
   std::string stage_;
@@ -65,7 +66,6 @@ class Progress {
   bool finished_ = false;
   // Exceptions in flight when the stage began (std::uncaught_exceptions).
   int uncaught_at_start_ = 0;
-  bool stopped_ = false;
 };
 
 }  // namespace loopsfm
