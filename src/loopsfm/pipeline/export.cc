@@ -35,15 +35,6 @@ constexpr std::pair<ExportFormat, std::string_view> kFormatNames[] = {
     {ExportFormat::kReport, "report"},
 };
 
-void CreateFolder(const fs::path& dir) {
-  std::error_code ec;
-  fs::create_directories(dir, ec);
-  if (ec || !fs::is_directory(dir)) {
-    throw StorageError(fmt::format("cannot create '{}': {}", dir.string(),
-                                   ec ? ec.message() : "a file of that name exists"));
-  }
-}
-
 // A folder written beside the one it replaces ("<name>.new") and swapped in by Commit().
 class ReplacementFolder {
  public:
@@ -167,6 +158,15 @@ bool SameFolder(const fs::path& a, const fs::path& b) {
 }
 
 }  // namespace
+
+void CreateFolder(const fs::path& dir, std::string_view what) {
+  std::error_code ec;
+  fs::create_directories(dir, ec);
+  if (ec || !fs::is_directory(dir)) {
+    throw StorageError(fmt::format("cannot create {}'{}': {}", what, dir.string(),
+                                   ec ? ec.message() : "a file of that name exists"));
+  }
+}
 
 std::string_view ExportFormatName(ExportFormat format) {
   for (const auto& [f, name] : kFormatNames) {

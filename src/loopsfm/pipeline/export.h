@@ -29,6 +29,10 @@ namespace loopsfm {
 
 enum class ExportFormat { kColmap, kPly, kTum, kImages, kNerfstudio, kGsplat, kReport };
 
+// Creates `dir` and its parents; StorageError "cannot create WHAT'DIR': why" when it cannot
+// (`what`: e.g. "output folder ", or empty).
+void CreateFolder(const std::filesystem::path& dir, std::string_view what = "");
+
 std::string_view ExportFormatName(ExportFormat format);
 // Every format but gsplat (which writes every registered frame a second time).
 std::set<ExportFormat> DefaultExportFormats();

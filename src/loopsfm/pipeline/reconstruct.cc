@@ -240,16 +240,6 @@ std::vector<Reconstruction> MapGlobally(const MapperInput& mapper_input,
 
 namespace {
 
-// StorageError when `output_dir` cannot be made.
-void CreateOutputFolder(const fs::path& output_dir) {
-  std::error_code ec;
-  fs::create_directories(output_dir, ec);
-  if (ec || !fs::is_directory(output_dir)) {
-    throw StorageError(fmt::format("cannot create output folder '{}': {}", output_dir.string(),
-                                   ec ? ec.message() : "a file of that name exists"));
-  }
-}
-
 // What follows matching: mapping (and the fill-in pass around unregistered frames, when the
 // frames' source is known), localisation, export and the report; Reconstruct's work and
 // MapDatabase's. `input` may be empty (the source is unknown).
@@ -400,7 +390,7 @@ ReconstructReport Reconstruct(const fs::path& input, const fs::path& output_dir,
   OpenFrameSource(input);
   std::optional<std::vector<TrajectoryEntry>> groundtruth;
   if (!options.groundtruth.empty()) groundtruth = ReadTrajectoryFile(options.groundtruth);
-  CreateOutputFolder(output_dir);
+  CreateFolder(output_dir, "output folder ");
   const fs::path database_path = output_dir / "database.db";
   const fs::path checkpoint_path = output_dir / "mapper_checkpoint.bin";
   const fs::path segment_checkpoints = output_dir / "segments";
@@ -500,7 +490,7 @@ ReconstructReport MapDatabase(const fs::path& database_path, const fs::path& inp
                                  database_path.string(), report.num_frames,
                                  report.num_frames == 1 ? "" : "s"));
   }
-  CreateOutputFolder(output_dir);
+  CreateFolder(output_dir, "output folder ");
   // Mapping only: no frames are added to the database.
   options.fill_in_rounds = 0;
   MapAndExport(database, database_path, source, output_dir, options, groundtruth, total, &report);
