@@ -63,8 +63,8 @@ enum class PositioningLoss {
 };
 
 enum class PositioningLinearSolver {
-  kSparseSchur,     // scales eliminated, sparse Cholesky on positions
-  kIterativeSchur,  // conjugate gradients on the Schur complement (very large problems)
+  kSparseSchur,     // scales eliminated, sparse Cholesky on the positions
+  kIterativeSchur,  // scales eliminated, conjugate gradients on the positions (Schur-Jacobi)
 };
 
 struct GlobalPositioningOptions {
@@ -97,7 +97,10 @@ struct GlobalPositioningOptions {
   // unit RMS distance from it (a similarity: residual angles do not change). Off: the
   // result stays in the frame the solve ended in (initial positions' frame, roughly).
   bool normalize_gauge = true;
-  PositioningLinearSolver linear_solver = PositioningLinearSolver::kSparseSchur;
+  // Iterative: each observation has a scale of its own, so eliminating them leaves every
+  // point in the reduced system, whose sparse factorisation costs more than the conjugate
+  // gradients (docs/global_mapper).
+  PositioningLinearSolver linear_solver = PositioningLinearSolver::kIterativeSchur;
   // Levenberg-Marquardt iterations.
   int max_num_iterations = 100;
   // Stop when the relative cost decrease of a step falls below this (GLOMAP: 1e-5).

@@ -39,6 +39,9 @@ void GlobalMapperOptions::Check() const {
   LOOPSFM_REQUIRE_OPTION(num_refinement_rounds >= 1,
                          "global mapper num_refinement_rounds must be at least 1, got {}",
                          num_refinement_rounds);
+  LOOPSFM_REQUIRE_OPTION(loose_points_per_frame >= 0,
+                         "global mapper loose_points_per_frame must not be negative, got {}",
+                         loose_points_per_frame);
   LOOPSFM_REQUIRE_OPTION(min_frame_points >= 0,
                          "global mapper min_frame_points must not be negative, got {}",
                          min_frame_points);
@@ -352,8 +355,9 @@ std::map<image_t, Rigid3d> RegisteredPoses(const Reconstruction& rec) {
 // Stage 4: the model at the positioned poses, its tracks triangulated and refined. The
 // positions are rough, so the first bundles accept reprojection errors
 // loose_error_factor times the usual bound (a track that does not fit its frames within the
-// bound would be split into several points, and frames held by few points); the model is
-// then triangulated again under the usual bound and refined.
+// bound would be split into several points, and frames held by few points), over each
+// frame's best points only; the model is then triangulated again under the usual bound
+// and refined whole.
 std::optional<Reconstruction> BuildModel(const MapperInput& input,
                                          const IncrementalMapperOptions& mapper_options,
                                          const GlobalMapperOptions& options,
@@ -369,7 +373,12 @@ std::optional<Reconstruction> BuildModel(const MapperInput& input,
   timer.Restart();
   for (int round = 0; round < options.num_loose_rounds; ++round) {
     ThrowIfStopRequested(hooks, "global mapping (bundles)");
-    loose.GlobalRefinement(mapper_report);
+    if (options.loose_points_per_frame > 0) {
+      loose.GlobalBundle(mapper_report,
+                         {.points = loose.LongestTrackPoints(options.loose_points_per_frame)});
+    } else {
+      loose.GlobalRefinement(mapper_report);
+    }
   }
   report->seconds_bundles += timer.ElapsedSeconds();
 
