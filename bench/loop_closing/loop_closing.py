@@ -12,10 +12,15 @@ graph's and the split tracks' together.
 
   bench/loop_closing/loop_closing.py --set NAME INPUT GROUNDTRUTH INTRINSICS \\
       [--set ...] [--focal-factor F] [--withhold] [--methods none,posegraph[,split,both]]
-      [--out DIR] [--loopsfm build/loopsfm] [--colmap [BINARY]]
+      [--out DIR] [--loopsfm build/loopsfm] [--global] [--colmap [BINARY]]
 
 --withhold maps without the pairs 50+ frames apart and adds them at the end
 (`reconstruct --withhold-loop-pairs`), so drift grows unchecked until the loops are closed.
+
+--global adds loopsfm's global mapper (`loopsfm map --mapper global`) on a copy of the same
+database (same wrong intrinsics, held fixed): it closes loops through the loop pairs in its view
+graph, all at once, so compare it with a run without --withhold. Its map time is the sum of its
+`map: ...` stages.
 
 --colmap adds COLMAP 3.8's mapper on a copy of the same database (same matches, same wrong
 intrinsics held fixed: --Mapper.ba_refine_* 0). COLMAP has no withholding: it always sees the
@@ -89,6 +94,24 @@ def summary(log):
     return float(map_s.group(1)) if map_s else float('nan'), loops, loop_s, models
 
 
+def run_global_mapper(loopsfm, media, base):
+    """loopsfm's global mapper on a copy of the none run's database. Returns (its model
+    folders, the sum of its mapping stages in seconds)."""
+    out = f'{base}_global'
+    shutil.rmtree(out, ignore_errors=True)
+    os.makedirs(out)
+    copy_database(f'{base}_none/database.db', os.path.join(out, 'database.db'))
+    run([loopsfm, 'map', '-d', os.path.join(out, 'database.db'), '-o', out, '--input', media,
+         '--mapper', 'global', '--export', 'colmap'], out + '.log')
+    seconds = sum(float(t) for t in
+                  re.findall(r'^time map: .*?\s([\d.]+) s$', open(out + '.log').read(), re.M))
+    sparse = os.path.join(out, 'sparse')
+    models = [os.path.join(sparse, d) for d in sorted(os.listdir(sparse))] if os.path.isdir(sparse) else []
+    if not models:
+        sys.exit(f'the global mapper made no model; see {out}.log')
+    return models, seconds
+
+
 def run_colmap_mapper(colmap, media, base):
     """COLMAP's mapper on a copy of the none run's database. Returns (its model folders, the
     mapper's wall seconds)."""
@@ -129,6 +152,8 @@ def main():
                              'first (it builds the database the others copy)')
     parser.add_argument('--out', default='loop_closing_out')
     parser.add_argument('--loopsfm', default='build/loopsfm')
+    parser.add_argument('--global', dest='global_mapper', action='store_true',
+                        help="also run loopsfm's global mapper on the same database")
     parser.add_argument('--colmap', nargs='?', const='colmap', default=None, metavar='BINARY',
                         help="also run COLMAP 3.8's mapper on the same database")
     args = parser.parse_args()
@@ -164,13 +189,18 @@ def main():
                          100 * (m['ate_fraction_of_path'] or float('nan')),
                          m['rotation_error_mean_deg'], gaps.get('mean'), gaps.get('max'),
                          map_s, len(loops), loop_s))
+        others = []
+        if args.global_mapper:
+            others.append(('loopsfm global mapper (loop pairs in the view graph)',
+                           run_global_mapper(args.loopsfm, media, base)))
         if args.colmap:
-            models, seconds = run_colmap_mapper(args.colmap, media, base)
+            others.append(('COLMAP 3.8 mapper (loop pairs while mapping)',
+                           run_colmap_mapper(args.colmap, media, base)))
+        for label, (models, seconds) in others:
             m = max((evaluate(args.loopsfm, model, gt) for model in models),
                     key=lambda e: e['num_matched'])
             gaps = m.get('loop_gaps') or {}
-            rows.append((name, 'COLMAP 3.8 mapper (loop pairs while mapping)', m['num_matched'],
-                         m['num_gt_frames'], len(models),
+            rows.append((name, label, m['num_matched'], m['num_gt_frames'], len(models),
                          100 * (m['ate_fraction_of_path'] or float('nan')),
                          m['rotation_error_mean_deg'], gaps.get('mean'), gaps.get('max'),
                          seconds, None, None))

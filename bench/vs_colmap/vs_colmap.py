@@ -1,8 +1,10 @@
 #!/usr/bin/env python3
 """loopsfm against COLMAP 3.8, side by side in one run, on the same input.
 
-Three columns per set:
+Four columns per set:
 - loopsfm: `loopsfm reconstruct` at its defaults (pairing: vocabtree), the set's intrinsics;
+- loopsfm global mapper on its DB: `loopsfm map --mapper global` on a copy of loopsfm's
+  database (the same matches, the global mapper instead of the incremental one);
 - COLMAP full: COLMAP's own pipeline at its defaults (feature_extractor, sequential matcher with
   quadratic overlap and vocabulary-tree loop detection, or exhaustive for templeRing; mapper);
 - COLMAP mapper on loopsfm's DB: COLMAP's mapper, with the flags of the COLMAP column, on a copy
@@ -33,16 +35,16 @@ from vsc_camera import read_intrinsics_file  # noqa: E402
 from vsc_sets import (ALL_SETS, DEFAULT_SETS, colmap_images, known_sets,  # noqa: E402
                       make_set)
 from vsc_tools import (MIN_INLIERS, load_average, log, run_colmap,  # noqa: E402
-                       run_colmap_on_loopsfm_db, run_loopsfm)
+                       run_colmap_on_loopsfm_db, run_loopsfm, run_loopsfm_global_on_db)
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
 DEFAULT_DATA = REPO_ROOT.parent / "shared" / "data"
 DEFAULT_LOOPSFM = REPO_ROOT / "build" / "loopsfm"
 
 # Result keys and column titles, in table order.
-TOOLS = ["loopsfm", "colmap", "colmap_on_loopsfm_db"]
-TITLES = {"loopsfm": "loopsfm", "colmap": "COLMAP full",
-          "colmap_on_loopsfm_db": "COLMAP mapper on loopsfm's DB"}
+TOOLS = ["loopsfm", "loopsfm_global", "colmap", "colmap_on_loopsfm_db"]
+TITLES = {"loopsfm": "loopsfm", "loopsfm_global": "loopsfm global mapper on its DB",
+          "colmap": "COLMAP full", "colmap_on_loopsfm_db": "COLMAP mapper on loopsfm's DB"}
 
 NUMERIC_KEYS = ["extraction_s", "matching_s", "mapping_s", "total_s", "vocab_tree_s", "peak_mib",
                 "registered", "models", "gt_frames", "ate_rmse", "ate_pct", "rot_mean_deg",
@@ -74,8 +76,9 @@ def run_order(run_index, tools):
     """Tools of one run in the order they run. The first tool alternates from run to run, so a
     slow drift of the machine's load hits loopsfm and COLMAP alike; COLMAP's mapper on
     loopsfm's database always follows loopsfm, whose database it reads."""
-    order = (["loopsfm", "colmap_on_loopsfm_db", "colmap"] if run_index % 2 == 0
-             else ["colmap", "loopsfm", "colmap_on_loopsfm_db"])
+    order = (["loopsfm", "loopsfm_global", "colmap_on_loopsfm_db", "colmap"]
+             if run_index % 2 == 0
+             else ["colmap", "loopsfm", "loopsfm_global", "colmap_on_loopsfm_db"])
     return [t for t in order if t in tools]
 
 
@@ -93,6 +96,9 @@ def bench_one_set(args, bench_set, workdir):
                 runs[tool].append(loopsfm_result)
             elif tool == "colmap":
                 runs[tool].append(run_colmap(args, bench_set, image_dir, run_dir))
+            elif tool == "loopsfm_global":
+                runs[tool].append(run_loopsfm_global_on_db(args, bench_set, run_dir,
+                                                           loopsfm_result))
             else:
                 runs[tool].append(run_colmap_on_loopsfm_db(args, bench_set, image_dir, run_dir,
                                                            loopsfm_result))
@@ -208,6 +214,9 @@ def format_table(result, tools):
     if "colmap_on_loopsfm_db" in columns:
         lines.append("COLMAP mapper on loopsfm's DB: extraction and matching are loopsfm's (its "
                      "database); total = loopsfm's extraction + matching + COLMAP's mapper.")
+    if "loopsfm_global" in columns:
+        lines.append("loopsfm global mapper on its DB: `loopsfm map --mapper global` on loopsfm's "
+                     "database; extraction and matching are loopsfm's.")
     if result["frame_extraction_s"] is not None:
         lines.append(f"Video to PNG frames for COLMAP (ffmpeg, in no total): "
                      f"{result['frame_extraction_s']:.1f} s.")
@@ -262,8 +271,8 @@ def parse_args(argv):
     parser.add_argument("--markdown", type=Path, metavar="FILE",
                         help="also write the tables to FILE")
     parser.add_argument("--tools", default=",".join(TOOLS),
-                        help=f"columns to run, from {','.join(TOOLS)} (default: all three; "
-                             f"colmap_on_loopsfm_db needs loopsfm)")
+                        help=f"columns to run, from {','.join(TOOLS)} (default: all four; "
+                             f"loopsfm_global and colmap_on_loopsfm_db need loopsfm)")
     parser.add_argument("--no-intrinsics", action="store_true",
                         help="uncalibrated: loopsfm without --intrinsics, COLMAP with its "
                              "SIMPLE_RADIAL camera and focal/distortion refined by its mapper")
@@ -306,8 +315,9 @@ def parse_args(argv):
     args.tools = [t for t in args.tools.split(",") if t]
     if not args.tools or any(t not in TOOLS for t in args.tools):
         parser.error(f"--tools takes a comma-separated list from {','.join(TOOLS)}")
-    if "colmap_on_loopsfm_db" in args.tools and "loopsfm" not in args.tools:
-        parser.error("colmap_on_loopsfm_db maps loopsfm's database: add loopsfm to --tools")
+    for tool in ("loopsfm_global", "colmap_on_loopsfm_db"):
+        if tool in args.tools and "loopsfm" not in args.tools:
+            parser.error(f"{tool} maps loopsfm's database: add loopsfm to --tools")
     if args.runs < 1:
         parser.error("--runs must be at least 1")
     if args.threads < 0:

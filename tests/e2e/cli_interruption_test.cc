@@ -13,10 +13,11 @@
 namespace loopsfm::e2e {
 namespace {
 
-// The JSON header of a mapping checkpoint (pipeline/mapper_checkpoint.h).
-nlohmann::json CheckpointHeader(const fs::path& path) {
+// The JSON header of a mapping checkpoint (pipeline/checkpoint_file.h) whose first line is
+// `magic_size` bytes long: 26 for the incremental mapper's, 33 for the global mapper's.
+nlohmann::json CheckpointHeader(const fs::path& path, size_t magic_size = 26) {
   const std::string bytes = ReadFileBytes(path);
-  constexpr size_t kMagic = 26, kLengthAt = kMagic + 4;
+  const size_t kLengthAt = magic_size + 4;
   if (bytes.size() < kLengthAt + 8) return nullptr;
   uint64_t length = 0;
   std::memcpy(&length, bytes.data() + kLengthAt, 8);
@@ -29,6 +30,33 @@ std::vector<std::string> ReconstructArgs(const fs::path& video, const fs::path& 
           "colmap,tum", "--checkpoint-every", "0.001"};
 }
 
+std::vector<std::string> GlobalArgs(const fs::path& video, const fs::path& out) {
+  return {"--threads", "1", "reconstruct", video.string(), "-o", out.string(),
+          "--export", "colmap,tum", "--mapper", "global"};
+}
+
+// The 100-frame street video both tests map.
+fs::path StreetVideo(const TempDir& dir) {
+  const CommandResult synth =
+      RunLoopsfm({"-q", "synth", "street", "-o", (dir / "scene").string(), "--video", "--frames",
+                  "100", "--width", "320", "--height", "240"});
+  EXPECT_EQ(synth.exit_code, 0) << synth;
+  return dir / "scene" / "video.mp4";
+}
+
+// Runs loopsfm with `args` (output to `log`) and kills it with -9 `delay` seconds after
+// `file` appears.
+CommandResult KilledAfter(const std::vector<std::string>& args, const fs::path& file,
+                          const std::string& delay, const fs::path& log) {
+  std::string command;
+  for (const std::string& arg : args) command += " " + ShellQuote(arg);
+  return RunShell(fmt::format(
+      "{}{} > {} 2>&1 & pid=$!; while [ ! -f {} ] && kill -0 $pid 2>/dev/null; do sleep 0.02; "
+      "done; sleep {}; kill -9 $pid; wait $pid",
+      ShellQuote(LoopsfmBinary().string()), command, ShellQuote(log.string()),
+      ShellQuote(file.string()), delay));
+}
+
 void ExpectSameResult(const fs::path& a, const fs::path& b) {
   for (const char* file : {"sparse/0/cameras.bin", "sparse/0/images.bin",
                            "sparse/0/points3D.bin", "trajectory.txt"}) {
@@ -39,25 +67,15 @@ void ExpectSameResult(const fs::path& a, const fs::path& b) {
 
 TEST(Interruption, KilledWhileMappingGoesOnFromTheCheckpointToTheSameModel) {
   TempDir dir;
-  const CommandResult synth =
-      RunLoopsfm({"-q", "synth", "street", "-o", (dir / "scene").string(), "--video", "--frames",
-                  "100", "--width", "320", "--height", "240"});
-  ASSERT_EQ(synth.exit_code, 0) << synth;
-  const fs::path video = dir / "scene" / "video.mp4";
-
+  const fs::path video = StreetVideo(dir);
   const CommandResult reference = RunLoopsfm(ReconstructArgs(video, dir / "reference"));
   ASSERT_EQ(reference.exit_code, 0) << reference;
 
   // Killed two seconds after the first checkpoint (they are written before every
   // registration here), well before mapping ends.
-  std::string command;
-  for (const std::string& arg : ReconstructArgs(video, dir / "killed")) command += " " + ShellQuote(arg);
   const fs::path checkpoint = dir / "killed" / "mapper_checkpoint.bin";
-  const CommandResult killed = RunShell(fmt::format(
-      "{}{} > {} 2>&1 & pid=$!; while [ ! -f {} ] && kill -0 $pid 2>/dev/null; do sleep 0.05; "
-      "done; sleep 2; kill -9 $pid; wait $pid",
-      ShellQuote(LoopsfmBinary().string()), command, ShellQuote((dir / "killed.log").string()),
-      ShellQuote(checkpoint.string())));
+  const CommandResult killed = KilledAfter(ReconstructArgs(video, dir / "killed"), checkpoint,
+                                           "2", dir / "killed.log");
   ASSERT_EQ(killed.exit_code, 128 + 9) << killed << "\n" << ReadFileBytes(dir / "killed.log");
   ASSERT_FALSE(fs::exists(dir / "killed" / "sparse")) << "mapping ended before the kill";
   const nlohmann::json header = CheckpointHeader(checkpoint);
@@ -120,6 +138,39 @@ TEST(Interruption, KilledWhileMappingGoesOnFromTheCheckpointToTheSameModel) {
                                               "--checkpoint-every", "0"});
   ASSERT_EQ(overwrite.exit_code, 0) << overwrite;
   EXPECT_FALSE(fs::exists(checkpoint));
+}
+
+// The global mapper saves after each stage: killed after its first checkpoint, the rerun
+// goes on from the last stage it saved to the uninterrupted run's model, byte for byte.
+TEST(Interruption, KilledWhileGlobalMappingGoesOnFromTheLastStage) {
+  TempDir dir;
+  const fs::path video = StreetVideo(dir);
+  const CommandResult reference = RunLoopsfm(GlobalArgs(video, dir / "reference"));
+  ASSERT_EQ(reference.exit_code, 0) << reference;
+
+  const fs::path checkpoint = dir / "killed" / "global_mapper_checkpoint.bin";
+  const CommandResult killed =
+      KilledAfter(GlobalArgs(video, dir / "killed"), checkpoint, "0", dir / "killed.log");
+  ASSERT_EQ(killed.exit_code, 128 + 9) << killed << "\n" << ReadFileBytes(dir / "killed.log");
+  ASSERT_FALSE(fs::exists(dir / "killed" / "sparse")) << "mapping ended before the kill";
+  const nlohmann::json header = CheckpointHeader(checkpoint, 33);
+  ASSERT_TRUE(header.is_object()) << "the checkpoint left by the kill cannot be read";
+  ASSERT_EQ(header.at("components").size(), 1u) << header.dump();
+  EXPECT_FALSE(header.at("components").at(0).at("done").get<bool>());
+
+  const CommandResult rerun = RunLoopsfm(GlobalArgs(video, dir / "killed"));
+  ASSERT_EQ(rerun.exit_code, 0) << rerun;
+  EXPECT_NE(rerun.output.find("going on from its checkpoint, 0 of 1 component mapped"),
+            std::string::npos)
+      << rerun;
+  ExpectSameResult(dir / "reference", dir / "killed");
+
+  // Once more: every stage is done, nothing is mapped again.
+  const CommandResult again = RunLoopsfm(GlobalArgs(video, dir / "killed"));
+  ASSERT_EQ(again.exit_code, 0) << again;
+  EXPECT_NE(again.output.find("1 of 1 component mapped"), std::string::npos) << again;
+  EXPECT_EQ(again.output.find("global mapper: rotations of"), std::string::npos) << again;
+  ExpectSameResult(dir / "reference", dir / "killed");
 }
 
 }  // namespace

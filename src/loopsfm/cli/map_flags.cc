@@ -31,7 +31,8 @@ void AddMapFlags(CLI::App* cmd, MapFlags* flags) {
                       "incremental: frames registered one by one, with loop closing and "
                       "checkpoints | global: every camera at once (view-graph cleaning, rotation "
                       "averaging, global positioning of cameras and points, bundle adjustment); "
-                      "loops are closed by the loop pairs in the view graph; no checkpoints")
+                      "loops are closed by the loop pairs in the view graph; checkpoints after "
+                      "each stage")
           ->capture_default_str();
   flags->loop_closing_option = cmd->add_option("--loop-closing", flags->loop_closing,
                   "posegraph: when the camera returns after drift, correct the map while mapping "
@@ -44,11 +45,12 @@ void AddMapFlags(CLI::App* cmd, MapFlags* flags) {
                 "Evaluation: map without the pairs between frames 50 or more apart, then add "
                 "them and close the loops at the end (drift grows unchecked until then; compare "
                 "with --loop-closing none)");
-  flags->checkpoint_option = cmd->add_option("--checkpoint-every", flags->checkpoint_every,
+  cmd->add_option("--checkpoint-every", flags->checkpoint_every,
                   "Save the mapping state to OUT/mapper_checkpoint.bin (with --segments, each "
                   "segment's to OUT/segments/) every this many seconds and when mapping ends; a "
                   "rerun after an interruption goes on from it (and one after a finished run "
-                  "skips mapping). 0: no checkpoints")
+                  "skips mapping). The global mapper saves to OUT/global_mapper_checkpoint.bin "
+                  "after each of its stages instead, whatever the number. 0: no checkpoints")
       ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
   cmd->add_option("--seed", flags->seed,
@@ -82,12 +84,12 @@ void AddMapFlags(CLI::App* cmd, MapFlags* flags) {
 void MapFlags::Resolve(ReconstructOptions* options) const {
   if (mapper == "global") {
     for (const CLI::Option* option :
-         {loop_closing_option, withhold_option, checkpoint_option, alternate_poses_option}) {
+         {loop_closing_option, withhold_option, alternate_poses_option}) {
       if (option->count() > 0) {
         throw InvalidArgument(fmt::format(
             "{} is an option of the incremental mapper; the global mapper closes loops "
-            "through the loop pairs in its view graph and has no checkpoints yet: leave it "
-            "out, or use --mapper incremental",
+            "through the loop pairs in its view graph: leave it out, or use --mapper "
+            "incremental",
             option->get_name()));
       }
     }

@@ -28,7 +28,6 @@ struct MapFlags {
   // The options among them that only some mappers take, to refuse them elsewhere.
   CLI::Option* loop_closing_option = nullptr;
   CLI::Option* withhold_option = nullptr;
-  CLI::Option* checkpoint_option = nullptr;
   CLI::Option* alternate_poses_option = nullptr;
   CLI::Option* segment_overlap_option = nullptr;
   // Sets the mapper, self-calibration, segment and output fields of `options` from the flags;

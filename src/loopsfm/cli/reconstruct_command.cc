@@ -235,7 +235,7 @@ void AddReconstructCommand(CLI::App& app) {
                 "With --all-frames: also put the localised frames into sparse/0 and the gsplat "
                 "layout (as images without observations)");
   cmd->add_flag("--overwrite", flags->overwrite,
-                "Start again: delete OUT/database.db and OUT/mapper_checkpoint.bin first instead "
+                "Start again: delete OUT/database.db and the mapping checkpoints first instead "
                 "of resuming from them (needed when the input or the extract / match options "
                 "changed since they were made)");
   cmd->callback([=] {

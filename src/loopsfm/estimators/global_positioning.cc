@@ -44,11 +44,15 @@ class DirectionCost {
   Eigen::Vector3d direction_;
 };
 
-// The unknowns: parameter blocks live in the map nodes and the scale vector, whose sizes
-// are fixed before the problem is built, so the pointers Ceres holds stay valid.
+// The unknowns: parameter blocks live in the positions and scale vectors, whose sizes are
+// fixed before the problem is built, so the pointers Ceres holds stay valid. The positions
+// are one array, cameras by id and then points by id: Ceres orders the blocks of an
+// ordering group by address, and in map nodes that order (and so the rounding of a solve)
+// would depend on what the heap held before.
 struct Unknowns {
-  std::map<image_t, Eigen::Vector3d> centres;
-  std::map<point3D_t, Eigen::Vector3d> points;
+  std::vector<Eigen::Vector3d> positions;
+  std::map<image_t, Eigen::Vector3d*> centres;
+  std::map<point3D_t, Eigen::Vector3d*> points;
   std::vector<double> scales;
   // Per input observation, its scale (nullptr for observations left out).
   std::vector<double*> observation_scales;
@@ -164,13 +168,17 @@ void InitializePositions(const GlobalPositioningInput& input, const Selection& s
     const double z = random.UniformReal(-extent, extent);
     return Eigen::Vector3d(x, y, z);
   };
+  unknowns->positions.resize(selection.cameras.size() + selection.points.size());
+  Eigen::Vector3d* next = unknowns->positions.data();
   for (image_t id : selection.cameras) {
     const auto it = input.initial_centres.find(id);
-    unknowns->centres[id] = it != input.initial_centres.end() ? it->second : draw();
+    *next = it != input.initial_centres.end() ? it->second : draw();
+    unknowns->centres[id] = next++;
   }
   for (point3D_t id : selection.points) {
     const auto it = input.initial_points.find(id);
-    unknowns->points[id] = it != input.initial_points.end() ? it->second : draw();
+    *next = it != input.initial_points.end() ? it->second : draw();
+    unknowns->points[id] = next++;
   }
 }
 
@@ -227,18 +235,18 @@ void BuildProblem(const GlobalPositioningInput& input, const Selection& selectio
     const BearingObservation& obs = input.observations[i];
     const bool given = centres.count(obs.image_id) && input.initial_points.count(obs.point_id);
     unknowns->observation_scales[i] =
-        add(selection.world_directions[i], unknowns->centres.at(obs.image_id).data(),
-            unknowns->points.at(obs.point_id).data(), given, point_loss);
+        add(selection.world_directions[i], unknowns->centres.at(obs.image_id)->data(),
+            unknowns->points.at(obs.point_id)->data(), given, point_loss);
   }
   for (const CameraPairDirection& dir : input.camera_directions) {
     const bool given = centres.count(dir.image_id1) && centres.count(dir.image_id2);
-    add(dir.direction_in_world.normalized(), unknowns->centres.at(dir.image_id1).data(),
-        unknowns->centres.at(dir.image_id2).data(), given, direction_loss);
+    add(dir.direction_in_world.normalized(), unknowns->centres.at(dir.image_id1)->data(),
+        unknowns->centres.at(dir.image_id2)->data(), given, direction_loss);
   }
   // Without point observations no residual block took the point loss.
   if (selection.num_observations == 0) delete point_loss;
-  for (auto& [id, point] : unknowns->points) ordering->AddElementToGroup(point.data(), 1);
-  for (auto& [id, centre] : unknowns->centres) ordering->AddElementToGroup(centre.data(), 2);
+  for (auto& [id, point] : unknowns->points) ordering->AddElementToGroup(point->data(), 1);
+  for (auto& [id, centre] : unknowns->centres) ordering->AddElementToGroup(centre->data(), 2);
 }
 
 ceres::Solver::Options SolverOptions(const GlobalPositioningOptions& options) {
@@ -265,7 +273,7 @@ ceres::Solver::Options SolverOptions(const GlobalPositioningOptions& options) {
 // cameras have converged; RetriangulatePoints moves them in one go instead.
 class CentresSettled : public ceres::IterationCallback {
  public:
-  CentresSettled(const std::map<image_t, Eigen::Vector3d>& centres, double tolerance)
+  CentresSettled(const std::map<image_t, Eigen::Vector3d*>& centres, double tolerance)
       : centres_(centres), tolerance_(tolerance), previous_(Snapshot()) {}
 
   ceres::CallbackReturnType operator()(const ceres::IterationSummary& summary) override {
@@ -285,11 +293,11 @@ class CentresSettled : public ceres::IterationCallback {
  private:
   std::vector<Eigen::Vector3d> Snapshot() const {
     std::vector<Eigen::Vector3d> snapshot;
-    for (const auto& [id, centre] : centres_) snapshot.push_back(centre);
+    for (const auto& [id, centre] : centres_) snapshot.push_back(*centre);
     return snapshot;
   }
 
-  const std::map<image_t, Eigen::Vector3d>& centres_;
+  const std::map<image_t, Eigen::Vector3d*>& centres_;
   const double tolerance_;
   std::vector<Eigen::Vector3d> previous_;
   int num_settled_ = 0;
@@ -321,7 +329,7 @@ std::vector<double> ObservationAngles(const GlobalPositioningInput& input,
     if (!selection.observation_used[i]) continue;
     const BearingObservation& obs = input.observations[i];
     angles[i] = AngleBetween(selection.world_directions[i],
-                             unknowns.points.at(obs.point_id) - unknowns.centres.at(obs.image_id));
+                             *unknowns.points.at(obs.point_id) - *unknowns.centres.at(obs.image_id));
   }
   return angles;
 }
@@ -342,10 +350,10 @@ int RetriangulatePoints(const GlobalPositioningInput& input, const Selection& se
   for (const auto& [id, observations] : observations_of) {
     rays.clear();
     for (size_t i : observations) {
-      rays.push_back({unknowns->centres.at(input.observations[i].image_id),
+      rays.push_back({*unknowns->centres.at(input.observations[i].image_id),
                       selection.world_directions[i]});
     }
-    Eigen::Vector3d& point = unknowns->points.at(id);
+    Eigen::Vector3d& point = *unknowns->points.at(id);
     const RayFit current = FitRays(point, rays, loss.get(), max_angle);
     const auto best = BestRayIntersection(rays, loss.get(), max_angle);
     if (!best) continue;
@@ -370,14 +378,13 @@ void NormalizeGauge(Unknowns* unknowns) {
   std::vector<Eigen::Vector3d> centres;
   Eigen::Vector3d mean = Eigen::Vector3d::Zero();
   for (const auto& [id, centre] : unknowns->centres) {
-    centres.push_back(centre);
-    mean += centre;
+    centres.push_back(*centre);
+    mean += *centre;
   }
   mean /= static_cast<double>(centres.size());
   const double spread = CentreSpread(centres);
   const double scale = spread > 0.0 ? 1.0 / spread : 1.0;
-  for (auto& [id, centre] : unknowns->centres) centre = scale * (centre - mean);
-  for (auto& [id, point] : unknowns->points) point = scale * (point - mean);
+  for (Eigen::Vector3d& position : unknowns->positions) position = scale * (position - mean);
 }
 
 void CountInput(const GlobalPositioningInput& input, const Selection& selection,
@@ -460,8 +467,8 @@ GlobalPositioningResult SolveGlobalPositioning(const GlobalPositioningInput& inp
     if (angle > max_angle) ++report.num_large_angle_observations;
   }
   if (options.normalize_gauge) NormalizeGauge(&unknowns);
-  result.camera_centres = std::move(unknowns.centres);
-  result.points = std::move(unknowns.points);
+  for (const auto& [id, centre] : unknowns.centres) result.camera_centres[id] = *centre;
+  for (const auto& [id, point] : unknowns.points) result.points[id] = *point;
   report.time_s = timer.ElapsedSeconds();
   return result;
 }

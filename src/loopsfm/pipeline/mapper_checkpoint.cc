@@ -1,12 +1,11 @@
 #include "loopsfm/pipeline/mapper_checkpoint.h"
 
 #include <cstring>
-#include <fstream>
-#include <iterator>
 #include <limits>
 #include <type_traits>
 #include <utility>
 
+#include "loopsfm/pipeline/checkpoint_file.h"
 #include "loopsfm/pipeline/wire_format.h"
 #include "loopsfm/util/byte_io.h"
 #include "loopsfm/util/errors.h"
@@ -16,8 +15,7 @@ namespace loopsfm {
 namespace fs = std::filesystem;
 namespace {
 
-constexpr char kMagic[] = "loopsfm mapper checkpoint\n";
-constexpr uint32_t kVersion = 4;
+const CheckpointFormat kFormat{"loopsfm mapper checkpoint\n", 4};
 
 // FNV-1a over the bytes of what mapping reads.
 class Digest {
@@ -253,13 +251,12 @@ MapperCheckpoint::Model ModelFromJson(const nlohmann::json& j) {
   return model;
 }
 
-nlohmann::json HeaderJson(const MapperCheckpoint& c, const nlohmann::json& fingerprint) {
+nlohmann::json HeaderJson(const MapperCheckpoint& c) {
   nlohmann::json kept = nlohmann::json::array();
   for (const MapperCheckpoint::Model& model : c.kept) kept.push_back(ModelJson(model));
   std::string tried;
   for (const char t : c.tried_initial_pairs) tried += t ? '1' : '0';
   return {
-      {"fingerprint", fingerprint},
       {"finished", c.finished},
       {"kept", kept},
       {"growing", c.growing ? ModelJson(*c.growing) : nlohmann::json()},
@@ -300,28 +297,6 @@ MapperCheckpoint CheckpointFromHeader(const nlohmann::json& j) {
   return c;
 }
 
-// The checkpoint in `bytes`; throws InputError (or a JSON error) saying what is wrong.
-MapperCheckpoint ParseCheckpoint(const std::string& bytes, const nlohmann::json& fingerprint,
-                                 bool* other_fingerprint) {
-  const size_t magic_size = sizeof(kMagic) - 1;
-  if (bytes.compare(0, magic_size, kMagic) != 0) throw InputError("it is not a checkpoint");
-  ByteReader reader(bytes, magic_size);
-  const uint32_t version = reader.Get<uint32_t>();
-  if (version != kVersion) {
-    throw InputError(fmt::format("it has version {}, this loopsfm writes {}", version, kVersion));
-  }
-  const nlohmann::json j = nlohmann::json::parse(reader.GetString());
-  if (j.at("fingerprint") != fingerprint) {
-    *other_fingerprint = true;
-    return {};
-  }
-  MapperCheckpoint checkpoint = CheckpointFromHeader(j);
-  for (MapperCheckpoint::Model& model : checkpoint.kept) model.state = GetMappedState(reader);
-  if (checkpoint.growing) checkpoint.growing->state = GetMappedState(reader);
-  if (!reader.AtEnd()) throw InputError("it has bytes after its last model");
-  return checkpoint;
-}
-
 }  // namespace
 
 nlohmann::json MapperCheckpointFingerprint(const MapperInput& input,
@@ -331,50 +306,23 @@ nlohmann::json MapperCheckpointFingerprint(const MapperInput& input,
 
 void WriteMapperCheckpoint(const fs::path& path, const MapperCheckpoint& checkpoint,
                            const nlohmann::json& fingerprint) {
-  const fs::path partial = fs::path(path.string() + ".partial");
-  {
-    std::ofstream out(partial, std::ios::binary | std::ios::trunc);
-    if (!out) {
-      throw StorageError(fmt::format("cannot write the mapping checkpoint '{}': check that the "
-                                     "folder is writable", partial.string()));
-    }
-    ByteWriter writer;
-    writer.PutBytes(kMagic, sizeof(kMagic) - 1);
-    writer.Put<uint32_t>(kVersion);
-    writer.PutString(HeaderJson(checkpoint, fingerprint).dump());
-    for (const MapperCheckpoint::Model& model : checkpoint.kept) PutMappedState(writer, model.state);
-    if (checkpoint.growing) PutMappedState(writer, checkpoint.growing->state);
-    out.write(writer.Bytes().data(), static_cast<std::streamsize>(writer.Bytes().size()));
-    out.close();
-    if (!out) {
-      throw StorageError(fmt::format("writing the mapping checkpoint '{}' failed (disk full?)",
-                                     partial.string()));
-    }
-  }
-  std::error_code ec;
-  fs::rename(partial, path, ec);
-  if (ec) {
-    throw StorageError(fmt::format("cannot replace the mapping checkpoint '{}': {}", path.string(),
-                                   ec.message()));
-  }
+  ByteWriter body;
+  for (const MapperCheckpoint::Model& model : checkpoint.kept) PutMappedState(body, model.state);
+  if (checkpoint.growing) PutMappedState(body, checkpoint.growing->state);
+  WriteCheckpointFile(path, kFormat, HeaderJson(checkpoint), fingerprint, body.Bytes());
 }
 
 std::optional<MapperCheckpoint> ReadMapperCheckpoint(const fs::path& path,
                                                      const nlohmann::json& fingerprint) {
-  if (!fs::exists(path)) return std::nullopt;
-  std::ifstream in(path, std::ios::binary);
-  const std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-  bool other_fingerprint = false;
-  try {
-    MapperCheckpoint checkpoint = ParseCheckpoint(bytes, fingerprint, &other_fingerprint);
-    if (!other_fingerprint) return checkpoint;
-    spdlog::info("the mapping checkpoint '{}' was made from other matches or with other mapper "
-                 "options; mapping starts from the beginning", path.string());
-  } catch (const std::exception& e) {  // InputError, or nlohmann::json's errors
-    spdlog::warn("cannot use the mapping checkpoint '{}' ({}); mapping starts from the beginning",
-                 path.string(), e.what());
-  }
-  return std::nullopt;
+  MapperCheckpoint checkpoint;
+  const bool read = ReadCheckpointFile(
+      path, kFormat, fingerprint, [&](const nlohmann::json& header, ByteReader& body) {
+        checkpoint = CheckpointFromHeader(header);
+        for (MapperCheckpoint::Model& model : checkpoint.kept) model.state = GetMappedState(body);
+        if (checkpoint.growing) checkpoint.growing->state = GetMappedState(body);
+      });
+  if (!read) return std::nullopt;
+  return checkpoint;
 }
 
 MapperCheckpointFile::MapperCheckpointFile(std::filesystem::path path, const MapperInput& input,

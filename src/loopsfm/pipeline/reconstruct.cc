@@ -7,6 +7,7 @@
 
 #include "loopsfm/eval/trajectory_metrics.h"
 #include "loopsfm/loop/loop_closing.h"
+#include "loopsfm/pipeline/global_mapper_checkpoint.h"
 #include "loopsfm/pipeline/mapper_checkpoint.h"
 #include "loopsfm/pipeline/run_report.h"
 #include "loopsfm/report/html_report.h"
@@ -217,15 +218,21 @@ std::vector<Reconstruction> MapSegmented(const MapperInput& mapper_input,
   return models;
 }
 
+// The global mapper; with checkpoints, after each stage in OUT/global_mapper_checkpoint.bin.
 std::vector<Reconstruction> MapGlobally(const MapperInput& mapper_input,
-                                        const ReconstructOptions& options, int pass,
+                                        const ReconstructOptions& options,
+                                        const fs::path& checkpoint_path, int pass,
                                         ReconstructReport* report) {
   report->global_mapper.emplace();
   GlobalMapperOptions global_options = options.global_mapper;
   global_options.verification = options.match.verification;
-  std::vector<Reconstruction> models =
-      RunGlobalMapper(mapper_input, options.mapper, global_options, &*report->global_mapper,
-                      &report->mapper, options.hooks);
+  std::optional<GlobalMapperCheckpointFile> checkpoint;
+  if (options.checkpoint_interval_seconds > 0.0) {
+    checkpoint.emplace(checkpoint_path, mapper_input, options.mapper, global_options);
+  }
+  std::vector<Reconstruction> models = RunGlobalMapper(
+      mapper_input, options.mapper, global_options, &*report->global_mapper, &report->mapper,
+      options.hooks, checkpoint ? checkpoint->checkpointing() : GlobalMapperCheckpointing{});
   const GlobalMapperReport& g = *report->global_mapper;
   const std::string suffix = pass == 0 ? "" : " (again)";
   report->stage_times.push_back({"map: view graph" + suffix, g.seconds_view_graph});
@@ -248,6 +255,7 @@ void MapAndExport(Database& database, const fs::path& database_path, const fs::p
                   const std::optional<std::vector<TrajectoryEntry>>& groundtruth,
                   const Timer& total, ReconstructReport* report) {
   const fs::path checkpoint_path = output_dir / "mapper_checkpoint.bin";
+  const fs::path global_checkpoint_path = output_dir / "global_mapper_checkpoint.bin";
   const fs::path segment_checkpoints = output_dir / "segments";
   Timer stage;
   // Mapping, and once more when adaptive keyframes left kept frames unregistered (a turn
@@ -279,7 +287,7 @@ void MapAndExport(Database& database, const fs::path& database_path, const fs::p
     if (options.segments.num_segments > 1) {
       models = MapSegmented(mapper_input, options, segment_checkpoints, pass, report);
     } else if (options.mapper_kind == MapperKind::kGlobal) {
-      models = MapGlobally(mapper_input, options, pass, report);
+      models = MapGlobally(mapper_input, options, global_checkpoint_path, pass, report);
     } else {
       // The fingerprint digests the whole mapper input: only with checkpoints.
       std::optional<MapperCheckpointFile> checkpoint;
@@ -397,6 +405,7 @@ ReconstructReport Reconstruct(const fs::path& input, const fs::path& output_dir,
   if (options.overwrite) {
     for (const char* suffix : {"", "-wal", "-shm"}) fs::remove(database_path.string() + suffix);
     fs::remove(checkpoint_path);
+    fs::remove(output_dir / "global_mapper_checkpoint.bin");
     fs::remove_all(segment_checkpoints);
   }
   Database database = Database::Open(database_path.string());

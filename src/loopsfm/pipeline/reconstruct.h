@@ -2,8 +2,9 @@
 // The whole job in one call: extract, match, map, export. Every stage resumes from what
 // OUT/database.db already holds, so an interrupted run continues where it stopped.
 //
-// Outputs: OUT/database.db (COLMAP-compatible), OUT/mapper_checkpoint.bin (mapping state,
-// pipeline/mapper_checkpoint.h), then what ReconstructOptions::output asks for
+// Outputs: OUT/database.db (COLMAP-compatible), OUT/mapper_checkpoint.bin or
+// OUT/global_mapper_checkpoint.bin (mapping state, pipeline/mapper_checkpoint.h and
+// global_mapper_checkpoint.h), then what ReconstructOptions::output asks for
 // (pipeline/export.h: COLMAP models, PLY, trajectory, frames, transforms.json, undistorted
 // layout, report).
 
@@ -42,9 +43,10 @@ struct ReconstructOptions {
   // Estimate the focal length of cameras without --intrinsics before mapping.
   bool self_calibrate = true;
   SelfCalibrationOptions self_calibration;
-  // Which mapper builds the models: the incremental one (with loop closing and checkpoints)
-  // or the global one (sfm/global_mapper.h), which uses `mapper`'s bundle, triangulation and
-  // filtering settings and has no checkpoints yet.
+  // Which mapper builds the models: the incremental one (with loop closing) or the global
+  // one (sfm/global_mapper.h), which uses `mapper`'s bundle, triangulation and filtering
+  // settings and saves OUT/global_mapper_checkpoint.bin after each stage (with
+  // checkpoint_interval_seconds > 0, whatever its value).
   MapperKind mapper_kind = MapperKind::kIncremental;
   IncrementalMapperOptions mapper;
   GlobalMapperOptions global_mapper;

@@ -1,21 +1,27 @@
 #include "loopsfm/pipeline/wire_format.h"
 
 namespace loopsfm {
-namespace {
+void PutRotation(ByteWriter& w, const Eigen::Quaterniond& rotation) {
+  w.PutBytes(rotation.coeffs().data(), 4 * sizeof(double));
+}
+
+Eigen::Quaterniond GetRotation(ByteReader& r) {
+  Eigen::Quaterniond rotation;
+  r.GetBytes(rotation.coeffs().data(), 4 * sizeof(double));
+  return rotation;
+}
 
 void PutPose(ByteWriter& w, const Rigid3d& pose) {
-  w.PutBytes(pose.rotation.coeffs().data(), 4 * sizeof(double));
+  PutRotation(w, pose.rotation);
   w.PutBytes(pose.translation.data(), 3 * sizeof(double));
 }
 
 Rigid3d GetPose(ByteReader& r) {
   Rigid3d pose;
-  r.GetBytes(pose.rotation.coeffs().data(), 4 * sizeof(double));
+  pose.rotation = GetRotation(r);
   r.GetBytes(pose.translation.data(), 3 * sizeof(double));
   return pose;
 }
-
-}  // namespace
 
 void PutCamera(ByteWriter& w, const Camera& camera) {
   w.Put<uint32_t>(camera.camera_id);

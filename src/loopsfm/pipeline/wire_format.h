@@ -13,6 +13,12 @@
 
 namespace loopsfm {
 
+void PutRotation(ByteWriter& w, const Eigen::Quaterniond& rotation);
+Eigen::Quaterniond GetRotation(ByteReader& r);
+
+void PutPose(ByteWriter& w, const Rigid3d& pose);
+Rigid3d GetPose(ByteReader& r);
+
 void PutCamera(ByteWriter& w, const Camera& camera);
 Camera GetCamera(ByteReader& r);
 

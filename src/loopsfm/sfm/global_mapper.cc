@@ -9,7 +9,7 @@
 #include "loopsfm/estimators/bearing_rays.h"
 #include "loopsfm/matching/geometric_verification.h"
 #include "loopsfm/math/graph.h"
-#include "loopsfm/sfm/mapper_state.h"
+#include "loopsfm/sfm/global_structure.h"
 #include "loopsfm/util/errors.h"
 #include "loopsfm/util/logging.h"
 #include "loopsfm/util/timer.h"
@@ -299,120 +299,14 @@ GlobalPositioningInput PositioningInput(const MapperInput& input, const FrameLoo
   return positioning;
 }
 
-// Frames seeing fewer than min_frame_points points leave the model; returns how many. The
-// gauge moves to the first two frames left where it was on one of them.
-int DropWeakFrames(const std::vector<image_t>& ordered, int min_frame_points,
-                   MapperState* state) {
-  Reconstruction& rec = state->reconstruction();
-  int dropped = 0;
-  std::vector<image_t> left;
-  for (const image_t id : ordered) {
-    if (!rec.IsRegistered(id)) continue;
-    if (static_cast<int>(rec.GetImage(id).num_points3D) < min_frame_points) {
-      rec.DeRegisterImage(id);
-      ++dropped;
-    } else {
-      left.push_back(id);
-    }
-  }
-  if (left.size() >= 2 && (!rec.IsRegistered(state->GaugeFirst()) ||
-                           !rec.IsRegistered(state->GaugeSecond()))) {
-    state->SetGauge(left[0], left[1]);
-  }
-  return dropped;
-}
-
-// Registers the frames of `poses` in `state` at those poses, in capture order, with the
-// cameras' intrinsics of `cameras` where given, sets the gauge, and triangulates every
-// track. Returns the frames registered, in capture order.
-std::vector<image_t> PlaceFrames(const MapperInput& input, const std::map<image_t, Rigid3d>& poses,
-                                 const Reconstruction* cameras, MapperState* state) {
-  Reconstruction& rec = state->reconstruction();
-  if (cameras) {
-    for (const auto& [id, camera] : cameras->Cameras()) rec.GetCamera(id) = camera;
-  }
-  std::vector<image_t> ordered;
-  for (const MapperFrame& frame : input.frames) {
-    const auto pose = poses.find(frame.image_id);
-    if (pose == poses.end()) continue;
-    rec.GetImage(frame.image_id).cam_from_world = pose->second;
-    rec.RegisterImage(frame.image_id);
-    ordered.push_back(frame.image_id);
-  }
-  if (ordered.size() < 2) return ordered;
-  state->SetGauge(ordered[0], ordered[1]);
-  state->RetriangulateAll();
-  state->FilterPoints({});
-  return ordered;
-}
-
-std::map<image_t, Rigid3d> RegisteredPoses(const Reconstruction& rec) {
-  std::map<image_t, Rigid3d> poses;
-  for (const image_t id : rec.RegImageIds()) poses[id] = rec.GetImage(id).cam_from_world;
-  return poses;
-}
-
-// Stage 4: the model at the positioned poses, its tracks triangulated and refined. The
-// positions are rough, so the first bundles accept reprojection errors
-// loose_error_factor times the usual bound (a track that does not fit its frames within the
-// bound would be split into several points, and frames held by few points), over each
-// frame's best points only; the model is then triangulated again under the usual bound
-// and refined whole.
-std::optional<Reconstruction> BuildModel(const MapperInput& input,
-                                         const IncrementalMapperOptions& mapper_options,
-                                         const GlobalMapperOptions& options,
-                                         const std::map<image_t, Rigid3d>& poses,
-                                         const RunHooks* hooks, GlobalMapperReport* report,
-                                         MapperReport* mapper_report) {
-  Timer timer;
-  IncrementalMapperOptions loose_options = mapper_options;
-  loose_options.max_reproj_error_px *= options.loose_error_factor;
-  MapperState loose(input, loose_options);
-  if (PlaceFrames(input, poses, nullptr, &loose).size() < 2) return std::nullopt;
-  report->seconds_triangulation += timer.ElapsedSeconds();
-  timer.Restart();
-  for (int round = 0; round < options.num_loose_rounds; ++round) {
-    ThrowIfStopRequested(hooks, "global mapping (bundles)");
-    if (options.loose_points_per_frame > 0) {
-      loose.GlobalBundle(mapper_report,
-                         {.points = loose.LongestTrackPoints(options.loose_points_per_frame)});
-    } else {
-      loose.GlobalRefinement(mapper_report);
-    }
-  }
-  report->seconds_bundles += timer.ElapsedSeconds();
-
-  timer.Restart();
-  MapperState state(input, mapper_options);
-  const std::vector<image_t> ordered =
-      PlaceFrames(input, RegisteredPoses(loose.reconstruction()), &loose.reconstruction(), &state);
-  Reconstruction& rec = state.reconstruction();
-  report->seconds_triangulation += timer.ElapsedSeconds();
-  timer.Restart();
-  for (int round = 0; round < options.num_refinement_rounds; ++round) {
-    ThrowIfStopRequested(hooks, "global mapping (bundles)");
-    state.GlobalRefinement(mapper_report);
-  }
-  const int dropped = DropWeakFrames(ordered, options.min_frame_points, &state);
-  report->num_frames_dropped += dropped;
-  if (dropped > 0 && rec.NumRegImages() >= 2) {
-    state.GlobalRefinement(mapper_report);
-  }
-  report->seconds_bundles += timer.ElapsedSeconds();
-  if (rec.NumRegImages() < 2) return std::nullopt;
-  rec.UpdateReprojectionErrors();
-  return std::move(rec);
-}
-
-// Stages 3 and 4 for one component with its frames' rotations: global positioning, then the
-// model. The report keeps the positioning report of the first (largest) component only.
-std::optional<Reconstruction> MapComponent(const MapperInput& input, const FrameLookup& lookup,
-                                           const IncrementalMapperOptions& mapper_options,
-                                           const GlobalMapperOptions& options,
-                                           const std::vector<PairPose>& pair_poses,
-                                           const Rotations& rotations, bool first,
-                                           const RunHooks* hooks, GlobalMapperReport* report,
-                                           MapperReport* mapper_report) {
+// Stage 3 for one component with its frames' rotations: the poses global positioning
+// gives, or nullopt where it fails. The report keeps the positioning report of the first
+// (largest) component only.
+std::optional<std::map<image_t, Rigid3d>> PositionComponent(
+    const MapperInput& input, const FrameLookup& lookup,
+    const IncrementalMapperOptions& mapper_options, const GlobalMapperOptions& options,
+    const std::vector<PairPose>& pair_poses, const Rotations& rotations, bool first,
+    GlobalMapperReport* report) {
   Timer timer;
   int num_tracks = 0;
   const GlobalPositioningInput positioning_input =
@@ -436,11 +330,128 @@ std::optional<Reconstruction> MapComponent(const MapperInput& input, const Frame
                  rotations.size(), positioned.report.termination);
     return std::nullopt;
   }
-  ThrowIfStopRequested(hooks, "global mapping (positions)");
-  return BuildModel(input, mapper_options, options,
-                    CamFromWorldFromCentres(rotations, positioned.camera_centres), hooks, report,
-                    mapper_report);
+  return CamFromWorldFromCentres(rotations, positioned.camera_centres);
 }
+
+// One run of the global mapper: the stages in order, for each component from where its
+// checkpoint left it, with the progress handed to checkpointing.save after each.
+class GlobalMapping {
+ public:
+  GlobalMapping(const MapperInput& input, const IncrementalMapperOptions& mapper_options,
+                const GlobalMapperOptions& options, const GlobalMapperCheckpointing& checkpointing,
+                const RunHooks* hooks, GlobalMapperReport* report, MapperReport* mapper_report)
+      : input_(input),
+        lookup_(input),
+        mapper_options_(mapper_options),
+        options_(options),
+        checkpointing_(checkpointing),
+        hooks_(hooks),
+        report_(report),
+        mapper_report_(mapper_report) {}
+
+  std::vector<Reconstruction> Run() {
+    if (checkpointing_.resume) {
+      Resume(*checkpointing_.resume);
+    } else {
+      report_->num_frames = static_cast<int>(input_.frames.size());
+      for (std::vector<RelativeRotation>& edges :
+           CleanedComponents(VerifiedPairPoses(), options_, mapper_options_, report_)) {
+        progress_.components.push_back({.edges = std::move(edges)});
+      }
+      Save();
+    }
+    ThrowIfStopRequested(hooks_, "global mapping (view graph)");
+    std::vector<Reconstruction> models;
+    for (size_t c = 0; c < progress_.components.size(); ++c) {
+      std::optional<Reconstruction> model = MapComponent(c);
+      if (model) models.push_back(std::move(*model));
+    }
+    return models;
+  }
+
+ private:
+  void Resume(const GlobalMapperCheckpoint& checkpoint) {
+    progress_ = checkpoint;
+    *report_ = checkpoint.report;
+    *mapper_report_ = checkpoint.mapper_report;
+    int done = 0;
+    for (const GlobalMapperCheckpoint::Component& component : progress_.components) {
+      done += component.done ? 1 : 0;
+    }
+    spdlog::info("global mapper: going on from its checkpoint, {} of {} component{} mapped",
+                 done, progress_.components.size(),
+                 progress_.components.size() == 1 ? "" : "s");
+  }
+
+  void Save() {
+    if (!checkpointing_.save) return;
+    progress_.report = *report_;
+    progress_.mapper_report = *mapper_report_;
+    checkpointing_.save(progress_);
+  }
+
+  // Every verified pair's relative pose, found once (the view graph and positioning use it).
+  const std::vector<PairPose>& VerifiedPairPoses() {
+    if (!pair_poses_) pair_poses_ = PairPoses(input_, lookup_, options_);
+    return *pair_poses_;
+  }
+
+  // Stages 2 to 4 of component c, from where its checkpoint left it; its model, if any.
+  std::optional<Reconstruction> MapComponent(size_t c) {
+    GlobalMapperCheckpoint::Component& component = progress_.components[c];
+    if (component.done) return RestoredModel(component);
+    const bool first = c == 0;
+    if (!component.rotations) {
+      component.rotations = AverageComponent(component.edges, options_, first, report_);
+      component.done = component.rotations->size() < 2;
+      Save();
+      ThrowIfStopRequested(hooks_, "global mapping (rotations)");
+      if (component.done) return std::nullopt;
+    }
+    if (!component.positioned) {
+      std::optional<std::map<image_t, Rigid3d>> poses =
+          PositionComponent(input_, lookup_, mapper_options_, options_, VerifiedPairPoses(),
+                            *component.rotations, first, report_);
+      component.done = !poses;
+      component.positioned = std::move(poses);
+      Save();
+      ThrowIfStopRequested(hooks_, "global mapping (positions)");
+      if (component.done) return std::nullopt;
+    }
+    if (!component.loose) {
+      component.loose = LooseBundles(input_, mapper_options_, options_, *component.positioned,
+                                     hooks_, report_, mapper_report_);
+      component.done = !component.loose;
+      Save();
+      if (component.done) return std::nullopt;
+    }
+    std::optional<Reconstruction> model = RefinedModel(
+        input_, mapper_options_, options_, *component.loose, hooks_, report_, mapper_report_);
+    component.done = true;
+    if (model) component.model = model->SaveMapped();
+    Save();
+    return model;
+  }
+
+  std::optional<Reconstruction> RestoredModel(
+      const GlobalMapperCheckpoint::Component& component) const {
+    if (!component.model) return std::nullopt;
+    Reconstruction model = EmptyReconstruction(input_);
+    model.RestoreMapped(*component.model);
+    return model;
+  }
+
+  const MapperInput& input_;
+  const FrameLookup lookup_;
+  const IncrementalMapperOptions& mapper_options_;
+  const GlobalMapperOptions& options_;
+  const GlobalMapperCheckpointing& checkpointing_;
+  const RunHooks* hooks_;
+  GlobalMapperReport* report_;
+  MapperReport* mapper_report_;
+  GlobalMapperCheckpoint progress_;
+  std::optional<std::vector<PairPose>> pair_poses_;
+};
 
 }  // namespace
 
@@ -448,7 +459,8 @@ std::vector<Reconstruction> RunGlobalMapper(const MapperInput& input,
                                             const IncrementalMapperOptions& mapper_options,
                                             const GlobalMapperOptions& options,
                                             GlobalMapperReport* report,
-                                            MapperReport* mapper_report, const RunHooks* hooks) {
+                                            MapperReport* mapper_report, const RunHooks* hooks,
+                                            const GlobalMapperCheckpointing& checkpointing) {
   mapper_options.Check();
   options.Check();
   GlobalMapperReport local_report;
@@ -456,23 +468,9 @@ std::vector<Reconstruction> RunGlobalMapper(const MapperInput& input,
   if (!report) report = &local_report;
   if (!mapper_report) mapper_report = &local_mapper_report;
   *report = {};
-  report->num_frames = static_cast<int>(input.frames.size());
-
-  const FrameLookup lookup(input);
-  const std::vector<PairPose> pair_poses = PairPoses(input, lookup, options);
-  const std::vector<std::vector<RelativeRotation>> components =
-      CleanedComponents(pair_poses, options, mapper_options, report);
-  ThrowIfStopRequested(hooks, "global mapping (view graph)");
-  std::vector<Reconstruction> models;
-  for (size_t c = 0; c < components.size(); ++c) {
-    const Rotations rotations = AverageComponent(components[c], options, c == 0, report);
-    ThrowIfStopRequested(hooks, "global mapping (rotations)");
-    if (rotations.size() < 2) continue;
-    std::optional<Reconstruction> model =
-        MapComponent(input, lookup, mapper_options, options, pair_poses, rotations, c == 0,
-                     hooks, report, mapper_report);
-    if (model) models.push_back(std::move(*model));
-  }
+  std::vector<Reconstruction> models =
+      GlobalMapping(input, mapper_options, options, checkpointing, hooks, report, mapper_report)
+          .Run();
   if (models.empty()) {
     spdlog::warn("global mapper: no part of the view graph could be mapped; no model");
     return models;
@@ -481,6 +479,7 @@ std::vector<Reconstruction> RunGlobalMapper(const MapperInput& input,
   std::stable_sort(models.begin(), models.end(), [](const auto& a, const auto& b) {
     return a.NumRegImages() > b.NumRegImages();
   });
+  report->num_registered = 0;
   for (const Reconstruction& model : models) {
     report->num_registered += static_cast<int>(model.NumRegImages());
   }

@@ -13,9 +13,9 @@
 //     positions together from the observations' bearings, with bounded residuals, from a
 //     start along the video's order. Camera-to-camera translation averaging degenerates where the camera
 //     moves along its own path, which is most of a video; the points make it well posed.
-//  4. Structure: every track triangulated from the poses (a track may hold several points,
-//     map_structure.h), then rounds of global bundle adjustment with re-triangulation,
-//     point merging and filtering.
+//  4. Structure (global_structure.h): every track triangulated from the poses (a track may
+//     hold several points, map_structure.h), then rounds of global bundle adjustment with
+//     re-triangulation, point merging and filtering.
 //
 // The bundle, triangulation and filtering settings are the incremental mapper's
 // (IncrementalMapperOptions), so both mappers refine a model the same way.
@@ -23,6 +23,7 @@
 #include <vector>
 
 #include "loopsfm/scene/reconstruction.h"
+#include "loopsfm/sfm/global_mapper_checkpoint.h"
 #include "loopsfm/sfm/global_mapper_options.h"
 #include "loopsfm/sfm/global_mapper_report.h"
 #include "loopsfm/sfm/mapper_input.h"
@@ -36,13 +37,15 @@ namespace loopsfm {
 // options' min_model_size frames (at most max_num_models), largest first; none for a
 // component where a stage fails (the log says which). `mapper_report` gets the bundle
 // counts and times as the incremental mapper reports them. `hooks` (may be null) are polled
-// between the stages and the bundle rounds: a stop throws Cancelled, and the mapping is lost
-// (the global mapper has no checkpoints).
+// between the stages and the bundle rounds: a stop throws Cancelled. With `checkpointing`,
+// the progress is handed out after each stage (of each component), and mapping may go on
+// from a saved one (global_mapper_checkpoint.h).
 std::vector<Reconstruction> RunGlobalMapper(const MapperInput& input,
                                             const IncrementalMapperOptions& mapper_options,
                                             const GlobalMapperOptions& options,
                                             GlobalMapperReport* report,
                                             MapperReport* mapper_report,
-                                            const RunHooks* hooks = nullptr);
+                                            const RunHooks* hooks = nullptr,
+                                            const GlobalMapperCheckpointing& checkpointing = {});
 
 }  // namespace loopsfm
