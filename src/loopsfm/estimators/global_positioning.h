@@ -97,10 +97,9 @@ struct GlobalPositioningOptions {
   // unit RMS distance from it (a similarity: residual angles do not change). Off: the
   // result stays in the frame the solve ended in (initial positions' frame, roughly).
   bool normalize_gauge = true;
-  // Iterative: each observation has a scale of its own, so eliminating them leaves every
-  // point in the reduced system, whose sparse factorisation costs more than the conjugate
-  // gradients (docs/global_mapper).
-  PositioningLinearSolver linear_solver = PositioningLinearSolver::kIterativeSchur;
+  // Iterative Schur solves each step faster, but its inexact steps end elsewhere on a hard
+  // problem (docs/global_mapper).
+  PositioningLinearSolver linear_solver = PositioningLinearSolver::kSparseSchur;
   // Levenberg-Marquardt iterations.
   int max_num_iterations = 100;
   // Stop when the relative cost decrease of a step falls below this (GLOMAP: 1e-5).

@@ -39,9 +39,6 @@ void GlobalMapperOptions::Check() const {
   LOOPSFM_REQUIRE_OPTION(num_refinement_rounds >= 1,
                          "global mapper num_refinement_rounds must be at least 1, got {}",
                          num_refinement_rounds);
-  LOOPSFM_REQUIRE_OPTION(loose_points_per_frame >= 0,
-                         "global mapper loose_points_per_frame must not be negative, got {}",
-                         loose_points_per_frame);
   LOOPSFM_REQUIRE_OPTION(min_frame_points >= 0,
                          "global mapper min_frame_points must not be negative, got {}",
                          min_frame_points);
