@@ -367,9 +367,13 @@ class GlobalMapping {
   }
 
  private:
+  // The report goes on from the checkpoint's, but its stage times are this run's (the
+  // summary gives them as the time each stage took now).
   void Resume(const GlobalMapperCheckpoint& checkpoint) {
     progress_ = checkpoint;
     *report_ = checkpoint.report;
+    report_->seconds_view_graph = report_->seconds_rotations = report_->seconds_positioning =
+        report_->seconds_triangulation = report_->seconds_bundles = 0.0;
     *mapper_report_ = checkpoint.mapper_report;
     int done = 0;
     for (const GlobalMapperCheckpoint::Component& component : progress_.components) {

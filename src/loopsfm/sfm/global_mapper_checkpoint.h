@@ -36,7 +36,8 @@ struct GlobalMapperCheckpoint {
   };
   // The components to map, largest first (stage 1 is done once a checkpoint exists).
   std::vector<Component> components;
-  // What the reports held then.
+  // What the reports held then (a run that goes on from here starts the stage times of
+  // GlobalMapperReport again from zero).
   GlobalMapperReport report;
   MapperReport mapper_report;
 };
