@@ -162,6 +162,14 @@ std::string GlobalMapperSummary(const GlobalMapperReport& g, const MapperReport&
                      "  structure", m.num_global_ba, m.seconds_global_ba, g.seconds_triangulation,
                      g.num_registered, g.num_frames, m.num_models, m.num_models == 1 ? "" : "s",
                      g.num_frames_dropped);
+  if (g.largest_step_ratio > 0.0) {
+    out += fmt::format("{:<28}largest step {:.1f}x the median ({} to {}){}\n", "  path",
+                       g.largest_step_ratio, g.largest_step_from, g.largest_step_to,
+                       g.num_broken_models > 0
+                           ? fmt::format("; {} model{} likely broken (see the warning)",
+                                         g.num_broken_models, g.num_broken_models == 1 ? "" : "s")
+                           : "");
+  }
   return out;
 }
 

@@ -36,7 +36,7 @@ NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE(GlobalMapperOptions, view_graph, verification
                                    rotation_averaging, max_rotation_error_deg, positioning,
                                    min_track_length, max_tracks_per_frame, pair_directions,
                                    chained_start, loose_error_factor, num_loose_rounds,
-                                   num_refinement_rounds, min_frame_points)
+                                   num_refinement_rounds, min_frame_points, max_step_ratio)
 NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE(ViewGraphCleaningReport, num_input_edges, num_ignored_edges,
                                    num_triangles, num_failed_triangles, num_edges_in_no_triangle,
                                    num_dropped_by_triangles, num_dropped_outside_component,
@@ -56,7 +56,9 @@ NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE(GlobalMapperReport, num_view_graph_edges, vie
                                    num_frames_in_other_components, rotations,
                                    num_rotation_outliers, num_frames_without_edges,
                                    num_tracks_positioned, positioning, num_frames_dropped,
-                                   num_frames, num_registered, seconds_view_graph,
+                                   num_frames, num_registered, largest_step_ratio,
+                                   largest_step_from, largest_step_to, num_broken_models,
+                                   seconds_view_graph,
                                    seconds_rotations, seconds_positioning,
                                    seconds_triangulation, seconds_bundles)
 

@@ -39,6 +39,8 @@ void GlobalMapperOptions::Check() const {
   LOOPSFM_REQUIRE_OPTION(num_refinement_rounds >= 1,
                          "global mapper num_refinement_rounds must be at least 1, got {}",
                          num_refinement_rounds);
+  LOOPSFM_REQUIRE_OPTION(max_step_ratio > 1.0,
+                         "global mapper max_step_ratio must be above 1, got {}", max_step_ratio);
   LOOPSFM_REQUIRE_OPTION(min_frame_points >= 0,
                          "global mapper min_frame_points must not be negative, got {}",
                          min_frame_points);
@@ -486,6 +488,7 @@ std::vector<Reconstruction> RunGlobalMapper(const MapperInput& input,
   }
   mapper_report->num_registered = report->num_registered;
   mapper_report->num_models = static_cast<int>(models.size());
+  CheckPathJumps(input, models, options, report);
   spdlog::info("global mapper: {} of {} frames in {} model{} ({} dropped for too few points), "
                "triangulation {:.1f} s, bundles {:.1f} s",
                report->num_registered, report->num_frames, models.size(),

@@ -46,6 +46,11 @@ struct GlobalMapperOptions {
   int num_loose_rounds = 1;
   int num_refinement_rounds = 1;
   int min_frame_points = 15;
+  // A model whose path jumps, between two frames next to each other in capture order, by
+  // more than max_step_ratio times its median step between such frames is reported as
+  // likely broken (global positioning can lose the scale between parts of a video, and the
+  // bundles do not always recover it; docs/global_mapper).
+  double max_step_ratio = 50.0;
   void Check() const;  // throws InvalidArgument
 };
 

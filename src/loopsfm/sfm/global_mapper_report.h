@@ -1,6 +1,7 @@
 #pragma once
 // What the global mapper (global_mapper.h) did, stage by stage.
 
+#include <string>
 #include <vector>
 
 #include "loopsfm/estimators/global_positioning.h"
@@ -33,6 +34,12 @@ struct GlobalMapperReport {
   // Frames of the input, and in the models at the end.
   int num_frames = 0;
   int num_registered = 0;
+  // The first model's largest step between frames next in capture order, as a multiple of
+  // its median step, and the two frames (names); models above
+  // GlobalMapperOptions::max_step_ratio are counted as likely broken.
+  double largest_step_ratio = 0.0;
+  std::string largest_step_from, largest_step_to;
+  int num_broken_models = 0;
   // Seconds per stage, over all components.
   double seconds_view_graph = 0.0;
   double seconds_rotations = 0.0;

@@ -5,6 +5,7 @@
 #include <algorithm>
 
 #include "loopsfm/scene/random_rotations.h"
+#include "loopsfm/sfm/global_structure.h"
 #include "loopsfm/sfm/sfm_test_problem.h"
 #include "loopsfm/util/errors.h"
 
@@ -165,7 +166,40 @@ TEST(GlobalMapper, OptionsAreChecked) {
   options = {};
   options.positioning.max_num_iterations = 0;
   EXPECT_THROW(options.Check(), InvalidArgument);
+  options = {};
+  options.max_step_ratio = 1.0;
+  EXPECT_THROW(options.Check(), InvalidArgument);
   EXPECT_NO_THROW(GlobalMapperOptions().Check());
+}
+
+// A model of the walk at its true poses has no jump in its path; the same with the frames
+// from the 20th on moved far off (the scale lost between two parts, as global positioning
+// did on fox) is counted as broken, and the jump named.
+TEST(GlobalMapper, PathJumpsAreReported) {
+  MapperProblemOptions problem_options;
+  problem_options.num_frames = 30;
+  const MapperProblem p = MakeMapperProblem(problem_options);
+  Reconstruction model = EmptyReconstruction(p.input);
+  for (size_t k = 0; k < p.input.frames.size(); ++k) {
+    const image_t id = p.input.frames[k].image_id;
+    model.GetImage(id).cam_from_world = p.cam_from_world[k];
+    model.RegisterImage(id);
+  }
+  GlobalMapperReport report;
+  CheckPathJumps(p.input, {model}, GlobalMapperOptions(), &report);
+  EXPECT_GT(report.largest_step_ratio, 0.0);
+  EXPECT_LT(report.largest_step_ratio, 3.0);
+  EXPECT_EQ(report.num_broken_models, 0);
+
+  for (size_t k = 20; k < p.input.frames.size(); ++k) {
+    Rigid3d& pose = model.GetImage(p.input.frames[k].image_id).cam_from_world;
+    pose.translation -= pose.rotation * Eigen::Vector3d(100.0, 0.0, 0.0);  // centre + 100 x
+  }
+  CheckPathJumps(p.input, {model}, GlobalMapperOptions(), &report);
+  EXPECT_GT(report.largest_step_ratio, 50.0);
+  EXPECT_EQ(report.num_broken_models, 1);
+  EXPECT_EQ(report.largest_step_from, p.input.frames[19].name);
+  EXPECT_EQ(report.largest_step_to, p.input.frames[20].name);
 }
 
 }  // namespace

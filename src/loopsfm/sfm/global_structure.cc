@@ -1,9 +1,12 @@
 #include "loopsfm/sfm/global_structure.h"
 
+#include <algorithm>
+#include <string>
 #include <utility>
 #include <vector>
 
 #include "loopsfm/sfm/mapper_state.h"
+#include "loopsfm/util/logging.h"
 #include "loopsfm/util/timer.h"
 
 namespace loopsfm {
@@ -56,7 +59,62 @@ std::vector<image_t> PlaceFrames(const MapperInput& input, const std::map<image_
   return ordered;
 }
 
+// The model's largest step between registered frames next in capture order, as a multiple
+// of the median step, with the two frames; nullopt with fewer than three frames or no motion.
+struct PathJump {
+  double ratio = 0.0;
+  image_t from = kInvalidImageId, to = kInvalidImageId;
+};
+std::optional<PathJump> LargestPathJump(const MapperInput& input, const Reconstruction& model) {
+  std::vector<std::pair<image_t, Eigen::Vector3d>> centres;
+  for (const MapperFrame& frame : input.frames) {
+    if (model.IsRegistered(frame.image_id)) {
+      centres.push_back(
+          {frame.image_id, model.GetImage(frame.image_id).cam_from_world.Inverse().translation});
+    }
+  }
+  if (centres.size() < 3) return std::nullopt;
+  std::vector<double> steps;
+  PathJump jump;
+  double largest = 0.0;
+  for (size_t k = 1; k < centres.size(); ++k) {
+    steps.push_back((centres[k].second - centres[k - 1].second).norm());
+    if (steps.back() > largest) {
+      largest = steps.back();
+      jump.from = centres[k - 1].first;
+      jump.to = centres[k].first;
+    }
+  }
+  std::nth_element(steps.begin(), steps.begin() + steps.size() / 2, steps.end());
+  const double median = steps[steps.size() / 2];
+  if (!(median > 0.0)) return std::nullopt;
+  jump.ratio = largest / median;
+  return jump;
+}
+
 }  // namespace
+
+void CheckPathJumps(const MapperInput& input, const std::vector<Reconstruction>& models,
+                    const GlobalMapperOptions& options, GlobalMapperReport* report) {
+  report->num_broken_models = 0;
+  for (size_t m = 0; m < models.size(); ++m) {
+    const std::optional<PathJump> jump = LargestPathJump(input, models[m]);
+    if (!jump) continue;
+    const std::string from = models[m].GetImage(jump->from).name;
+    const std::string to = models[m].GetImage(jump->to).name;
+    if (m == 0) {
+      report->largest_step_ratio = jump->ratio;
+      report->largest_step_from = from;
+      report->largest_step_to = to;
+    }
+    if (jump->ratio <= options.max_step_ratio) continue;
+    ++report->num_broken_models;
+    spdlog::warn("global mapper: model {} is likely broken: its path jumps between {} and {} "
+                 "by {:.0f} times its median step between frames (global positioning lost the "
+                 "scale between parts of the video); map with --mapper incremental instead",
+                 m, from, to, jump->ratio);
+  }
+}
 
 std::optional<MappedState> LooseBundles(const MapperInput& input,
                                         const IncrementalMapperOptions& mapper_options,

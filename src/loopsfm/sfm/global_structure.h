@@ -10,6 +10,7 @@
 
 #include <map>
 #include <optional>
+#include <vector>
 
 #include "loopsfm/geometry/rigid3.h"
 #include "loopsfm/scene/reconstruction.h"
@@ -41,5 +42,12 @@ std::optional<Reconstruction> RefinedModel(const MapperInput& input,
                                            const MappedState& loose, const RunHooks* hooks,
                                            GlobalMapperReport* report,
                                            MapperReport* mapper_report);
+
+// Warns of the models whose path jumps between two frames next in capture order by more than
+// GlobalMapperOptions::max_step_ratio times the median step (global positioning can lose the
+// scale between parts of a video); the report gets the first model's largest jump and the
+// count of such models.
+void CheckPathJumps(const MapperInput& input, const std::vector<Reconstruction>& models,
+                    const GlobalMapperOptions& options, GlobalMapperReport* report);
 
 }  // namespace loopsfm
