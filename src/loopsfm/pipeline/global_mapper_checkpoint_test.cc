@@ -114,7 +114,9 @@ TEST_F(GlobalMapperCheckpointTest, GoingOnFromTheFileGivesTheUninterruptedResult
     EXPECT_EQ(mapper_report.num_global_ba, mapper_report_.num_global_ba);
     // Stage times are this run's: none for the stages the checkpoint had done.
     EXPECT_EQ(report.seconds_view_graph, 0.0);
-    if (k >= 2) EXPECT_EQ(report.seconds_positioning, 0.0);
+    if (k >= 2) {
+      EXPECT_EQ(report.seconds_positioning, 0.0);
+    }
   }
 }
 
