@@ -293,6 +293,23 @@ def run_loopsfm(args, bench_set, run_dir):
     return result
 
 
+def copy_loopsfm_db(bench_set, loopsfm_result, db, what):
+    """The result a column mapping a copy of loopsfm's database starts from (loopsfm's
+    extraction and matching times), with the copy made at `db`; rc 1 and a note where loopsfm
+    left no database. `what` ends the log line that says so."""
+    source_db = Path(loopsfm_result["database"])
+    result = {"load_1min": load_average(), "rc": 0, "database": str(db),
+              "extraction_s": loopsfm_result.get("extraction_s"),
+              "matching_s": loopsfm_result.get("matching_s")}
+    if not source_db.exists():
+        log(f"{bench_set.name}: no loopsfm database {what} ({source_db})")
+        result.update(rc=1, eval_note="no loopsfm database")
+        return result
+    db.parent.mkdir(parents=True, exist_ok=True)
+    shutil.copyfile(source_db, db)
+    return result
+
+
 def run_loopsfm_global_on_db(args, bench_set, run_dir, loopsfm_result):
     """`loopsfm map --mapper global` on a copy of loopsfm's database: the same matches as the
     loopsfm column, the global mapper. Extraction and matching times are loopsfm's; mapping
@@ -300,18 +317,10 @@ def run_loopsfm_global_on_db(args, bench_set, run_dir, loopsfm_result):
     as the loopsfm column counts everything after matching."""
     out_dir = run_dir / "loopsfm_global"
     shutil.rmtree(out_dir, ignore_errors=True)
-    out_dir.mkdir(parents=True)
-    source_db = Path(loopsfm_result["database"])
-    result = {"load_1min": load_average(), "rc": 0, "database": str(out_dir / "out" / "database.db"),
-              "extraction_s": loopsfm_result.get("extraction_s"),
-              "matching_s": loopsfm_result.get("matching_s")}
-    if not source_db.exists():
-        log(f"{bench_set.name}: no loopsfm database for the global mapper ({source_db})")
-        result.update(rc=1, eval_note="no loopsfm database")
-        return result
-    (out_dir / "out").mkdir()
     db = out_dir / "out" / "database.db"
-    shutil.copyfile(source_db, db)
+    result = copy_loopsfm_db(bench_set, loopsfm_result, db, "for the global mapper")
+    if result["rc"] != 0:
+        return result
     log(f"{bench_set.name}: loopsfm global mapper on loopsfm's database ...")
     cmd = [args.loopsfm] + (["--threads", args.threads] if args.threads else [])
     cmd += ["map", "-d", db, "-o", out_dir / "out", "--mapper", "global", "--input",
@@ -472,16 +481,10 @@ def run_colmap_on_loopsfm_db(args, bench_set, image_dir, run_dir, loopsfm_result
     out_dir = run_dir / "colmap_on_loopsfm_db"
     shutil.rmtree(out_dir, ignore_errors=True)
     (out_dir / "sparse").mkdir(parents=True)
-    source_db = Path(loopsfm_result["database"])
-    result = {"load_1min": load_average(), "rc": 0, "database": str(out_dir / "database.db"),
-              "extraction_s": loopsfm_result.get("extraction_s"),
-              "matching_s": loopsfm_result.get("matching_s")}
-    if not source_db.exists():
-        log(f"{bench_set.name}: no loopsfm database to map with COLMAP ({source_db})")
-        result.update(rc=1, eval_note="no loopsfm database")
-        return result
     db = out_dir / "database.db"
-    shutil.copyfile(source_db, db)
+    result = copy_loopsfm_db(bench_set, loopsfm_result, db, "to map with COLMAP")
+    if result["rc"] != 0:
+        return result
     log(f"{bench_set.name}: colmap mapper on loopsfm's database ...")
     proc = run_measured(mapper_command(args, db, image_dir, out_dir / "sparse"),
                         out_dir / "mapper.log", args.timeout)

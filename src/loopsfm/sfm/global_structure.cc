@@ -59,18 +59,18 @@ std::vector<image_t> PlaceFrames(const MapperInput& input, const std::map<image_
   return ordered;
 }
 
-// The model's largest step between registered frames next in capture order, as a multiple
-// of the median step, with the two frames; nullopt with fewer than three frames or no motion.
 struct PathJump {
   double ratio = 0.0;
   image_t from = kInvalidImageId, to = kInvalidImageId;
 };
+
+// The model's largest step between registered frames next in capture order, as a multiple
+// of the median step, with the two frames; nullopt with fewer than three frames or no motion.
 std::optional<PathJump> LargestPathJump(const MapperInput& input, const Reconstruction& model) {
   std::vector<std::pair<image_t, Eigen::Vector3d>> centres;
   for (const MapperFrame& frame : input.frames) {
     if (model.IsRegistered(frame.image_id)) {
-      centres.push_back(
-          {frame.image_id, model.GetImage(frame.image_id).cam_from_world.Inverse().translation});
+      centres.push_back({frame.image_id, model.GetImage(frame.image_id).ProjectionCenter()});
     }
   }
   if (centres.size() < 3) return std::nullopt;
