@@ -125,7 +125,7 @@ TEST_F(GlobalMapperCheckpointTest, OtherInputOrOptionsSetTheCheckpointAside) {
   const fs::path path = dir_ / "global_mapper_checkpoint.bin";
   WriteGlobalMapperCheckpoint(path, checkpoints_[2], Fingerprint());
   GlobalMapperOptions other = options_;
-  other.num_loose_rounds += 1;
+  other.loose_points_per_frame += 1;
   EXPECT_FALSE(ReadGlobalMapperCheckpoint(
                    path, problem_.input,
                    GlobalMapperCheckpointFingerprint(problem_.input, mapper_options_, other))

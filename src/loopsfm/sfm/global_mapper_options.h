@@ -44,6 +44,11 @@ struct GlobalMapperOptions {
   // round follows.
   double loose_error_factor = 8.0;
   int num_loose_rounds = 1;
+  // The loose rounds only correct the poses for the triangulation after them, so they
+  // bundle the points of the longest tracks alone, taken while a frame has fewer than
+  // loose_points_per_frame of them (MapperState::LongestTrackPoints); 0: every point, with
+  // re-triangulation and filtering as in the refinement rounds.
+  int loose_points_per_frame = 300;
   int num_refinement_rounds = 1;
   int min_frame_points = 15;
   // A model whose path jumps, between two frames next to each other in capture order, by

@@ -131,7 +131,12 @@ std::optional<MappedState> LooseBundles(const MapperInput& input,
   timer.Restart();
   for (int round = 0; round < options.num_loose_rounds; ++round) {
     ThrowIfStopRequested(hooks, "global mapping (bundles)");
-    loose.GlobalRefinement(mapper_report);
+    if (options.loose_points_per_frame > 0) {
+      loose.GlobalBundle(mapper_report,
+                         {.points = loose.LongestTrackPoints(options.loose_points_per_frame)});
+    } else {
+      loose.GlobalRefinement(mapper_report);
+    }
   }
   report->seconds_bundles += timer.ElapsedSeconds();
   MappedState state = loose.reconstruction().SaveMapped();

@@ -5,8 +5,8 @@
 // The positions are rough, so the first bundles accept reprojection errors
 // GlobalMapperOptions::loose_error_factor times the usual bound (a track that does not fit
 // its frames within the bound would be split into several points, and frames held by few
-// points): they correct the poses and the cameras. The model is then triangulated again
-// under the usual bound and refined.
+// points), over each frame's best points only: they correct the poses and the cameras. The
+// model is then triangulated again under the usual bound and refined whole.
 
 #include <map>
 #include <optional>
