@@ -36,7 +36,8 @@ NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE(GlobalMapperOptions, view_graph, verification
                                    rotation_averaging, max_rotation_error_deg, positioning,
                                    min_track_length, max_tracks_per_frame, pair_directions,
                                    chained_start, loose_error_factor, num_loose_rounds,
-                                   loose_points_per_frame, num_refinement_rounds,
+                                   loose_points_per_frame, loose_settle_tolerance,
+                                   num_refinement_rounds,
                                    min_frame_points, max_step_ratio)
 NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE(ViewGraphCleaningReport, num_input_edges, num_ignored_edges,
                                    num_triangles, num_failed_triangles, num_edges_in_no_triangle,

@@ -24,8 +24,11 @@ struct GlobalMapperOptions {
   double max_rotation_error_deg = 5.0;
   // Stage 3: camera centres and track positions together from the observations' bearings.
   // Tracks seen by at least min_track_length frames of the model enter, longest first,
-  // while one of their frames has fewer than max_tracks_per_frame of them.
-  GlobalPositioningOptions positioning;
+  // while one of their frames has fewer than max_tracks_per_frame of them. The chained start
+  // puts every point where its rays meet, so the re-triangulation and second solve meant for
+  // points a random start leaves stranded are off (set retriangulate_points with
+  // chained_start off).
+  GlobalPositioningOptions positioning{.retriangulate_points = false};
   int min_track_length = 3;
   int max_tracks_per_frame = 100;
   // Also a term per verified pair with an essential matrix, the direction between its two
@@ -47,8 +50,11 @@ struct GlobalMapperOptions {
   // The loose rounds only correct the poses for the triangulation after them, so they
   // bundle the points of the longest tracks alone, taken while a frame has fewer than
   // loose_points_per_frame of them (MapperState::LongestTrackPoints); 0: every point, with
-  // re-triangulation and filtering as in the refinement rounds.
+  // re-triangulation and filtering as in the refinement rounds. They end once the cameras
+  // have settled to loose_settle_tolerance (BundleAdjustmentOptions::settle_tolerance),
+  // looser than the refinement rounds' tolerance.
   int loose_points_per_frame = 300;
+  double loose_settle_tolerance = 1e-3;
   int num_refinement_rounds = 1;
   int min_frame_points = 15;
   // A model whose path jumps, between two frames next to each other in capture order, by

@@ -133,9 +133,10 @@ std::optional<MappedState> LooseBundles(const MapperInput& input,
     ThrowIfStopRequested(hooks, "global mapping (bundles)");
     if (options.loose_points_per_frame > 0) {
       loose.GlobalBundle(mapper_report,
-                         {.points = loose.LongestTrackPoints(options.loose_points_per_frame)});
+                         {.points = loose.LongestTrackPoints(options.loose_points_per_frame),
+                          .settle_tolerance = options.loose_settle_tolerance});
     } else {
-      loose.GlobalRefinement(mapper_report);
+      loose.GlobalRefinement(mapper_report, options.loose_settle_tolerance);
     }
   }
   report->seconds_bundles += timer.ElapsedSeconds();
