@@ -24,14 +24,19 @@ using Rotations = std::map<image_t, Eigen::Quaterniond>;
 class FrameLookup {
  public:
   explicit FrameLookup(const MapperInput& input) {
-    for (const MapperFrame& frame : input.frames) frames_[frame.image_id] = &frame;
+    for (const MapperFrame& frame : input.frames) {
+      capture_index_[frame.image_id] = static_cast<int>(frames_.size());
+      frames_[frame.image_id] = &frame;
+    }
     for (const Camera& camera : input.cameras) cameras_[camera.camera_id] = &camera;
   }
   const MapperFrame& Frame(image_t id) const { return *frames_.at(id); }
+  int CaptureIndex(image_t id) const { return capture_index_.at(id); }
   const Camera& CameraOf(image_t id) const { return *cameras_.at(Frame(id).camera_id); }
 
  private:
   std::unordered_map<image_t, const MapperFrame*> frames_;
+  std::unordered_map<image_t, int> capture_index_;
   std::unordered_map<camera_t, const Camera*> cameras_;
 };
 
@@ -219,6 +224,27 @@ void ChainedStart(const MapperInput& input, const Rotations& rotations,
   }
 }
 
+// The elements of a track in frames with a rotation, at most `max` of them spread evenly
+// over the track in capture order.
+std::vector<const TrackElement*> SpreadObservations(const std::vector<TrackElement>& elements,
+                                                    const Rotations& rotations,
+                                                    const FrameLookup& lookup, int max) {
+  std::vector<const TrackElement*> in_model;
+  for (const TrackElement& el : elements) {
+    if (rotations.count(el.image_id) > 0) in_model.push_back(&el);
+  }
+  const size_t n = in_model.size(), kept = std::min(n, static_cast<size_t>(max));
+  if (kept == n) return in_model;
+  std::stable_sort(in_model.begin(), in_model.end(), [&](const auto* a, const auto* b) {
+    return lookup.CaptureIndex(a->image_id) < lookup.CaptureIndex(b->image_id);
+  });
+  std::vector<const TrackElement*> spread(kept);
+  for (size_t i = 0; i < kept; ++i) {
+    spread[i] = in_model[(i * (n - 1) + (kept - 1) / 2) / (kept - 1)];  // rounded
+  }
+  return spread;
+}
+
 // Stage 3's input: the bearings of the tracks chosen (see GlobalMapperOptions), each track's
 // index standing for its point.
 GlobalPositioningInput PositioningInput(const MapperInput& input, const FrameLookup& lookup,
@@ -243,8 +269,9 @@ GlobalPositioningInput PositioningInput(const MapperInput& input, const FrameLoo
     });
     if (!wanted) continue;
     ++*num_tracks;
-    for (const TrackElement& el : elements) {
-      if (rotations.count(el.image_id) == 0) continue;
+    for (const TrackElement* spread : SpreadObservations(elements, rotations, lookup,
+                                                         options.max_observations_per_track)) {
+      const TrackElement& el = *spread;
       ++taken[el.image_id];
       const Eigen::Vector2d xy =
           lookup.CameraOf(el.image_id)

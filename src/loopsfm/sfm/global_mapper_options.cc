@@ -18,6 +18,9 @@ void GlobalMapperOptions::Check() const {
   LOOPSFM_REQUIRE_OPTION(max_tracks_per_frame > 0,
                          "global mapper max_tracks_per_frame must be positive, got {}",
                          max_tracks_per_frame);
+  LOOPSFM_REQUIRE_OPTION(max_observations_per_track >= 2,
+                         "global mapper max_observations_per_track must be at least 2, got {}",
+                         max_observations_per_track);
   LOOPSFM_REQUIRE_OPTION(loose_error_factor >= 1.0,
                          "global mapper loose_error_factor must be at least 1, got {}",
                          loose_error_factor);

@@ -24,13 +24,17 @@ struct GlobalMapperOptions {
   double max_rotation_error_deg = 5.0;
   // Stage 3: camera centres and track positions together from the observations' bearings.
   // Tracks seen by at least min_track_length frames of the model enter, longest first,
-  // while one of their frames has fewer than max_tracks_per_frame of them. The chained start
+  // while one of their frames has fewer than max_tracks_per_frame of them, each with at most
+  // max_observations_per_track of its observations, spread evenly over the track in capture
+  // order (a track that returns on every lap of a walk would otherwise tie dozens of frames
+  // to each other in the solve's factorisation). The chained start
   // puts every point where its rays meet, so the re-triangulation and second solve meant for
   // points a random start leaves stranded are off (set retriangulate_points with
   // chained_start off).
   GlobalPositioningOptions positioning{.retriangulate_points = false};
   int min_track_length = 3;
   int max_tracks_per_frame = 100;
+  int max_observations_per_track = 10;
   // Also a term per verified pair with an essential matrix, the direction between its two
   // camera centres as the pair's relative pose gives it (GlobalPositioningOptions::
   // camera_direction_weight weighs it against one point observation).

@@ -161,6 +161,9 @@ TEST(GlobalMapper, OptionsAreChecked) {
   options.loose_error_factor = 0.5;
   EXPECT_THROW(options.Check(), InvalidArgument);
   options = {};
+  options.max_observations_per_track = 1;
+  EXPECT_THROW(options.Check(), InvalidArgument);
+  options = {};
   options.loose_settle_tolerance = -1e-3;
   EXPECT_THROW(options.Check(), InvalidArgument);
   options = {};

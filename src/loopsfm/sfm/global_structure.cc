@@ -132,9 +132,10 @@ std::optional<MappedState> LooseBundles(const MapperInput& input,
   for (int round = 0; round < options.num_loose_rounds; ++round) {
     ThrowIfStopRequested(hooks, "global mapping (bundles)");
     if (options.loose_points_per_frame > 0) {
-      loose.GlobalBundle(mapper_report,
-                         {.points = loose.LongestTrackPoints(options.loose_points_per_frame),
-                          .settle_tolerance = options.loose_settle_tolerance});
+      MapperState::GlobalBundleScope scope;
+      scope.points = loose.LongestTrackPoints(options.loose_points_per_frame);
+      scope.settle_tolerance = options.loose_settle_tolerance;
+      loose.GlobalBundle(mapper_report, scope);
     } else {
       loose.GlobalRefinement(mapper_report, options.loose_settle_tolerance);
     }
