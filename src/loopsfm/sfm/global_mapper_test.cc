@@ -66,6 +66,32 @@ TEST(GlobalMapper, LoopWalkIsMappedWholeDespiteOutlierPairs) {
   EXPECT_GE(mapper_report.num_global_ba, 2);
 }
 
+// The walk back sees the points of the walk out again, so its tracks are long; global
+// positioning takes at most max_observations_per_track of each, and still maps the walk.
+TEST(GlobalMapper, PositioningTakesAtMostTheCapOfEachTrack) {
+  const MapperProblem p = NoisyWalkBack(0.3, 0);
+  GlobalMapperOptions uncapped;
+  uncapped.max_observations_per_track = 1000;
+  GlobalMapperReport report;
+  RunGlobalMapper(p.input, OneThread(), uncapped, &report, nullptr);
+  ASSERT_GT(report.num_tracks_positioned, 0);
+  EXPECT_GT(report.positioning.num_observations, 4 * report.num_tracks_positioned);
+
+  GlobalMapperOptions capped;
+  capped.max_observations_per_track = 4;
+  const std::vector<Reconstruction> models =
+      RunGlobalMapper(p.input, OneThread(), capped, &report, nullptr);
+  ASSERT_GT(report.num_tracks_positioned, 0);
+  EXPECT_LE(report.positioning.num_observations, 4 * report.num_tracks_positioned);
+  ASSERT_EQ(models.size(), 1u);
+  const testing::PoseError error = testing::ComparePoses(models[0], p);
+  EXPECT_EQ(error.num_registered, 50);
+  const double ends = (p.cam_from_world.front().Inverse().translation -
+                       p.cam_from_world.back().Inverse().translation).norm();
+  EXPECT_LT(error.max_centre_error * ends, 0.02);
+  EXPECT_LT(error.max_rotation_deg, 0.2);
+}
+
 // A walk whose view graph falls apart at frame 25 (no pair across it): parts of 25 and 15
 // frames.
 MapperProblem WalkInTwoParts() {
