@@ -27,10 +27,9 @@ struct GlobalMapperOptions {
   // while one of their frames has fewer than max_tracks_per_frame of them, each with at most
   // max_observations_per_track of its observations, spread evenly over the track in capture
   // order (a track that returns on every lap of a walk would otherwise tie dozens of frames
-  // to each other in the solve's factorisation). The chained start
-  // puts every point where its rays meet, so the re-triangulation and second solve meant for
-  // points a random start leaves stranded are off (set retriangulate_points with
-  // chained_start off).
+  // to each other in the solve's factorisation). The chained start puts every point where
+  // its rays meet, so the re-triangulation and second solve meant for points a random start
+  // leaves stranded are off (set retriangulate_points with chained_start off).
   GlobalPositioningOptions positioning{.retriangulate_points = false};
   int min_track_length = 3;
   int max_tracks_per_frame = 100;
