@@ -33,7 +33,7 @@ NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE(GlobalPositioningOptions, loss, loss_scale,
                                    max_num_iterations, function_tolerance, settle_tolerance,
                                    seed)
 NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE(GlobalMapperOptions, view_graph, verification,
-                                   rotation_averaging, max_rotation_error_deg, positioning,
+                                   planar_pose_by_triangles, split_at_cuts, rotation_averaging, max_rotation_error_deg, positioning,
                                    min_track_length, max_tracks_per_frame,
                                    max_observations_per_track, pair_directions,
                                    chained_start, loose_error_factor, num_loose_rounds,
@@ -54,7 +54,9 @@ NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE(GlobalPositioningReport, success, num_cameras
                                    num_large_angle_observations, num_retriangulated_points,
                                    num_iterations, initial_cost, final_cost, time_s,
                                    termination)
-NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE(GlobalMapperReport, num_view_graph_edges, view_graph,
+NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE(GlobalMapperReport, num_view_graph_edges, num_cuts,
+                                   num_pairs_across_cuts,
+                                   num_planar_pairs, num_planar_poses_from_homography, view_graph,
                                    num_components, num_components_mapped,
                                    num_frames_in_other_components, rotations,
                                    num_rotation_outliers, num_frames_without_edges,
@@ -63,7 +65,7 @@ NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE(GlobalMapperReport, num_view_graph_edges, vie
                                    largest_step_from, largest_step_to, num_broken_models,
                                    seconds_view_graph,
                                    seconds_rotations, seconds_positioning,
-                                   seconds_triangulation, seconds_bundles)
+                                   seconds_triangulation, seconds_bundles, seconds_joining)
 
 namespace fs = std::filesystem;
 namespace {

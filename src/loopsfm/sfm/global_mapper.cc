@@ -7,9 +7,10 @@
 #include <utility>
 
 #include "loopsfm/estimators/bearing_rays.h"
-#include "loopsfm/matching/geometric_verification.h"
 #include "loopsfm/math/graph.h"
 #include "loopsfm/sfm/global_structure.h"
+#include "loopsfm/sfm/global_view_graph.h"
+#include "loopsfm/sfm/incremental_mapper.h"
 #include "loopsfm/util/errors.h"
 #include "loopsfm/util/logging.h"
 #include "loopsfm/util/timer.h"
@@ -40,51 +41,6 @@ class FrameLookup {
   std::unordered_map<camera_t, const Camera*> cameras_;
 };
 
-bool HasRelativePose(const TwoViewGeometry& geometry) {
-  switch (geometry.config) {
-    case TwoViewGeometry::kCalibrated:
-    case TwoViewGeometry::kUncalibrated:
-    case TwoViewGeometry::kPlanar:
-    case TwoViewGeometry::kPanoramic: return true;
-    default: return false;
-  }
-}
-
-// The relative pose of a verified pair, as the global mapper uses it.
-struct PairPose {
-  image_t image_id1 = kInvalidImageId;
-  image_t image_id2 = kInvalidImageId;
-  Rigid3d cam2_from_cam1;
-  // The translation's direction is known (zero for a panoramic pair).
-  bool has_translation = false;
-  double weight = 0.0;  // inliers
-};
-
-// Every verified pair with a relative pose. A planar pair's pose comes from its F, as an
-// uncalibrated pair's (EssentialPoseOfPair): the homography's decomposition picks the wrong
-// solution where the baseline is short.
-std::vector<PairPose> PairPoses(const MapperInput& input, const FrameLookup& lookup,
-                                const GlobalMapperOptions& options) {
-  std::vector<PairPose> poses;
-  for (const MapperPair& pair : input.pairs) {
-    const TwoViewGeometry& geometry = pair.geometry;
-    if (!geometry.IsVerified() || !HasRelativePose(geometry)) continue;
-    PairPose pose{pair.pair.image_id1, pair.pair.image_id2, geometry.cam2_from_cam1,
-                  geometry.config != TwoViewGeometry::kPanoramic,
-                  static_cast<double>(geometry.inlier_matches.size())};
-    if (geometry.config == TwoViewGeometry::kPlanar) {
-      const image_t id1 = pair.pair.image_id1, id2 = pair.pair.image_id2;
-      const std::optional<Rigid3d> essential = EssentialPoseOfPair(
-          lookup.CameraOf(id1), lookup.Frame(id1).points2D, lookup.CameraOf(id2),
-          lookup.Frame(id2).points2D, options.verification, geometry);
-      if (essential) pose.cam2_from_cam1 = *essential;
-    }
-    pose.has_translation = pose.has_translation && pose.cam2_from_cam1.translation.norm() > 0.0;
-    poses.push_back(pose);
-  }
-  return poses;
-}
-
 // The direction from camera 1's centre to camera 2's in the world: cam2_from_cam1 = (R, t)
 // puts camera 1's centre at t in camera 2, so c1 - c2 = R_2^T t.
 Eigen::Vector3d CentreDirection(const PairPose& pose, const Eigen::Quaterniond& cam2_from_world) {
@@ -92,13 +48,23 @@ Eigen::Vector3d CentreDirection(const PairPose& pose, const Eigen::Quaterniond& 
 }
 
 // Stage 1: the edges of the view graph that cleaning keeps, one list per connected component
-// of at least min_model_size frames, largest first, at most max_num_models of them.
+// of at least min_model_size frames, largest first, at most max_num_models of them; with
+// split_at_cuts, no edge across a cut.
 std::vector<std::vector<RelativeRotation>> CleanedComponents(
-    const std::vector<PairPose>& pair_poses, const GlobalMapperOptions& options,
-    const IncrementalMapperOptions& mapper_options, GlobalMapperReport* report) {
+    const MapperInput& input, const FrameLookup& lookup, const std::vector<PairPose>& pair_poses,
+    const GlobalMapperOptions& options, const IncrementalMapperOptions& mapper_options,
+    GlobalMapperReport* report) {
   Timer timer;
+  const std::vector<int> run = RunsBetweenCuts(input);
+  report->num_cuts = run.empty() ? 0 : run.back();
+  report->num_pairs_across_cuts = 0;
   std::vector<RelativeRotation> edges;
   for (const PairPose& pose : pair_poses) {
+    if (options.split_at_cuts && run[lookup.CaptureIndex(pose.image_id1)] !=
+                                     run[lookup.CaptureIndex(pose.image_id2)]) {
+      ++report->num_pairs_across_cuts;
+      continue;
+    }
     edges.push_back({pose.image_id1, pose.image_id2, pose.cam2_from_cam1.rotation, pose.weight});
   }
   report->num_view_graph_edges = static_cast<int>(edges.size());
@@ -133,9 +99,12 @@ std::vector<std::vector<RelativeRotation>> CleanedComponents(
   report->num_components = components.NumComponents();
   report->num_components_mapped = static_cast<int>(mapped.size());
   report->seconds_view_graph = timer.ElapsedSeconds();
-  spdlog::info("global mapper: view graph {} edges, {} dropped around triangles; {} connected "
-               "component{}, {} mapped ({} frames in the others)",
-               edges.size(), cleaned.report.num_dropped_by_triangles, report->num_components,
+  spdlog::info("global mapper: view graph {} edges ({} planar, {} with the homography's pose; {} "
+               "cut{} in the video, {} pairs across left out), {} dropped around triangles; {} "
+               "connected component{}, {} mapped ({} frames in the others)",
+               edges.size(), report->num_planar_pairs, report->num_planar_poses_from_homography,
+               report->num_cuts, report->num_cuts == 1 ? "" : "s", report->num_pairs_across_cuts,
+               cleaned.report.num_dropped_by_triangles, report->num_components,
                report->num_components == 1 ? "" : "s", report->num_components_mapped,
                report->num_frames_in_other_components);
   return mapped;
@@ -351,7 +320,8 @@ class GlobalMapping {
     } else {
       report_->num_frames = static_cast<int>(input_.frames.size());
       for (std::vector<RelativeRotation>& edges :
-           CleanedComponents(VerifiedPairPoses(), options_, mapper_options_, report_)) {
+           CleanedComponents(input_, lookup_, VerifiedPairPoses(), options_, mapper_options_,
+                             report_)) {
         progress_.components.push_back({.edges = std::move(edges)});
       }
       Save();
@@ -392,7 +362,7 @@ class GlobalMapping {
 
   // Every verified pair's relative pose, found once (the view graph and positioning use it).
   const std::vector<PairPose>& VerifiedPairPoses() {
-    if (!pair_poses_) pair_poses_ = PairPoses(input_, lookup_, options_);
+    if (!pair_poses_) pair_poses_ = PairPoses(input_, options_, report_);
     return *pair_poses_;
   }
 
@@ -425,8 +395,10 @@ class GlobalMapping {
       Save();
       if (component.done) return std::nullopt;
     }
-    std::optional<Reconstruction> model = RefinedModel(
-        input_, mapper_options_, options_, *component.loose, hooks_, report_, mapper_report_);
+    const bool joined_later = report_->num_pairs_across_cuts > 0;
+    std::optional<Reconstruction> model =
+        RefinedModel(input_, mapper_options_, options_, *component.loose, !joined_later, hooks_,
+                     report_, mapper_report_);
     component.done = true;
     if (model) component.model = model->SaveMapped();
     Save();
@@ -453,6 +425,27 @@ class GlobalMapping {
   std::optional<std::vector<PairPose>> pair_poses_;
 };
 
+// The models mapped between the video's cuts, joined by the incremental mapper: it merges
+// them where their points agree and registers the frames no model has (without loop
+// closing: the loop pairs are in the view graphs already).
+std::vector<Reconstruction> JoinAcrossCuts(const MapperInput& input,
+                                           const IncrementalMapperOptions& mapper_options,
+                                           const std::vector<Reconstruction>& models,
+                                           GlobalMapperReport* report,
+                                           MapperReport* mapper_report) {
+  Timer timer;
+  IncrementalMapperOptions join_options = mapper_options;
+  join_options.loop_closure.method = LoopClosingMethod::kNone;
+  std::vector<Reconstruction> joined =
+      ExtendIncrementalModels(input, join_options, models, mapper_report);
+  report->seconds_joining = timer.ElapsedSeconds();
+  spdlog::info("global mapper: the {} model{} mapped between {} cut{} joined into {} by their "
+               "shared points, {:.1f} s",
+               models.size(), models.size() == 1 ? "" : "s", report->num_cuts,
+               report->num_cuts == 1 ? "" : "s", joined.size(), report->seconds_joining);
+  return joined;
+}
+
 }  // namespace
 
 std::vector<Reconstruction> RunGlobalMapper(const MapperInput& input,
@@ -471,6 +464,9 @@ std::vector<Reconstruction> RunGlobalMapper(const MapperInput& input,
   std::vector<Reconstruction> models =
       GlobalMapping(input, mapper_options, options, checkpointing, hooks, report, mapper_report)
           .Run();
+  if (report->num_pairs_across_cuts > 0 && !models.empty()) {
+    models = JoinAcrossCuts(input, mapper_options, models, report, mapper_report);
+  }
   if (models.empty()) {
     spdlog::warn("global mapper: no part of the view graph could be mapped; no model");
     return models;

@@ -14,9 +14,18 @@ struct GlobalMapperOptions {
   // own, largest first, up to its max_num_models (IncrementalMapperOptions); with
   // view_graph.keep_largest_component, only the largest does.
   ViewGraphCleaningOptions view_graph{.keep_largest_component = false};
-  // The pairs' verification settings (its inlier threshold), for the rotations of planar
-  // pairs, which come from their F.
+  // The pairs' verification settings (its inlier threshold), for the poses of planar pairs
+  // from their F.
   TwoViewVerificationOptions verification;
+  // A planar pair's pose is the one of its two candidates, the homography's decomposition and
+  // F's, that more triangles of the view graph agree with (global_view_graph.h); false: F's.
+  bool planar_pose_by_triangles = true;
+  // Where the video cuts (two frames next in capture order share no verified pair), the pairs
+  // across the cut stay out of the view graph, so the frames on either side are mapped
+  // apart; where some were left out, the incremental mapper then joins the models by the
+  // points they share and registers the frames left (ExtendIncrementalModels), as it would
+  // across the cut, and its bundles refine them. No change for a video without cuts.
+  bool split_at_cuts = true;
   // Stage 2: every frame's rotation from the relative rotations of the edges kept. Edges
   // whose measured rotation is further than max_rotation_error_deg from the averaged ones
   // are counted as outliers, and frames whose every edge is one are dropped.

@@ -11,8 +11,15 @@
 namespace loopsfm {
 
 struct GlobalMapperReport {
-  // Verified pairs with a relative pose that entered the view graph.
+  // Verified pairs with a relative pose that entered the view graph; the cuts in the video
+  // and the pairs across them, left out of it (GlobalMapperOptions::split_at_cuts).
   int num_view_graph_edges = 0;
+  int num_cuts = 0;
+  int num_pairs_across_cuts = 0;
+  // Planar pairs with two candidate poses, and those that took the homography's
+  // (global_view_graph.h).
+  int num_planar_pairs = 0;
+  int num_planar_poses_from_homography = 0;
   ViewGraphCleaningReport view_graph;
   // Connected components of the cleaned view graph, those mapped (at least min_model_size
   // frames, at most max_num_models), and the frames of the others.
@@ -46,6 +53,8 @@ struct GlobalMapperReport {
   double seconds_positioning = 0.0;
   double seconds_triangulation = 0.0;
   double seconds_bundles = 0.0;
+  // Joining the models mapped between cuts.
+  double seconds_joining = 0.0;
 };
 
 }  // namespace loopsfm

@@ -149,8 +149,8 @@ std::optional<MappedState> LooseBundles(const MapperInput& input,
 std::optional<Reconstruction> RefinedModel(const MapperInput& input,
                                            const IncrementalMapperOptions& mapper_options,
                                            const GlobalMapperOptions& options,
-                                           const MappedState& loose, const RunHooks* hooks,
-                                           GlobalMapperReport* report,
+                                           const MappedState& loose, bool refine,
+                                           const RunHooks* hooks, GlobalMapperReport* report,
                                            MapperReport* mapper_report) {
   Timer timer;
   std::map<image_t, Rigid3d> poses;
@@ -162,13 +162,13 @@ std::optional<Reconstruction> RefinedModel(const MapperInput& input,
   Reconstruction& rec = state.reconstruction();
   report->seconds_triangulation += timer.ElapsedSeconds();
   timer.Restart();
-  for (int round = 0; round < options.num_refinement_rounds; ++round) {
+  for (int round = 0; refine && round < options.num_refinement_rounds; ++round) {
     ThrowIfStopRequested(hooks, "global mapping (bundles)");
     state.GlobalRefinement(mapper_report);
   }
   const int dropped = DropWeakFrames(ordered, options.min_frame_points, &state);
   report->num_frames_dropped += dropped;
-  if (dropped > 0 && rec.NumRegImages() >= 2) {
+  if (refine && dropped > 0 && rec.NumRegImages() >= 2) {
     state.GlobalRefinement(mapper_report);
   }
   report->seconds_bundles += timer.ElapsedSeconds();

@@ -35,12 +35,14 @@ std::optional<MappedState> LooseBundles(const MapperInput& input,
 
 // The model at the poses and cameras of `loose`, triangulated under the usual bound, refined,
 // and without the frames that see fewer than min_frame_points points; nullopt when fewer
-// than two frames are left.
+// than two frames are left. Without `refine`, for a model that the bundles of the join
+// across cuts refine anyway (GlobalMapperOptions::split_at_cuts), the refinement rounds are
+// left out.
 std::optional<Reconstruction> RefinedModel(const MapperInput& input,
                                            const IncrementalMapperOptions& mapper_options,
                                            const GlobalMapperOptions& options,
-                                           const MappedState& loose, const RunHooks* hooks,
-                                           GlobalMapperReport* report,
+                                           const MappedState& loose, bool refine,
+                                           const RunHooks* hooks, GlobalMapperReport* report,
                                            MapperReport* mapper_report);
 
 // Warns of the models whose path jumps between two frames next in capture order by more than
