@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <limits>
 #include <set>
 #include <tuple>
 #include <unordered_set>
@@ -106,21 +107,30 @@ std::vector<Triangle> FindTriangles(const Graph& graph, const std::vector<Relati
 // Drops the edges that fail all their triangles, then the rest worst first (see
 // view_graph_cleaning.h); returns the dropped flags per graph edge.
 std::vector<bool> DropByTriangles(int num_edges, const std::vector<Triangle>& triangles,
+                                  const std::vector<double>& edge_weight,
                                   double min_pass_fraction) {
   std::vector<std::vector<int>> triangles_of_edge(num_edges);
-  std::vector<int> num_pass(num_edges, 0), num_fail(num_edges, 0);
+  std::vector<double> num_pass(num_edges, 0), num_fail(num_edges, 0);
+  // What triangle t says about its edge e weighs as the weaker of its other two edges.
+  const auto say = [&](size_t t, int e) {
+    double weight = std::numeric_limits<double>::infinity();
+    for (int other : triangles[t].edges) {
+      if (other != e) weight = std::min(weight, edge_weight[other]);
+    }
+    return weight;
+  };
   for (size_t t = 0; t < triangles.size(); ++t) {
     for (int e : triangles[t].edges) {
       triangles_of_edge[e].push_back(static_cast<int>(t));
-      ++(triangles[t].passes ? num_pass : num_fail)[e];
+      (triangles[t].passes ? num_pass : num_fail)[e] += say(t, e);
     }
   }
   std::vector<bool> dropped(num_edges, false);
   std::vector<bool> alive(triangles.size(), true);
   // Ordered worst first: smallest passing fraction, then most failing triangles, then index.
-  using Key = std::tuple<double, int, int>;
+  using Key = std::tuple<double, double, int>;
   const auto key = [&](int e) {
-    return Key(static_cast<double>(num_pass[e]) / (num_pass[e] + num_fail[e]), -num_fail[e], e);
+    return Key(num_pass[e] / (num_pass[e] + num_fail[e]), -num_fail[e], e);
   };
   const auto candidate = [&](int e) {
     return !dropped[e] && num_fail[e] > 0 &&
@@ -137,7 +147,7 @@ std::vector<bool> DropByTriangles(int num_edges, const std::vector<Triangle>& tr
       for (int other : triangles[t].edges) {
         if (other == e || dropped[other]) continue;
         if (candidate(other)) queue.erase(key(other));
-        --(triangles[t].passes ? num_pass : num_fail)[other];
+        (triangles[t].passes ? num_pass : num_fail)[other] -= say(t, other);
         if (candidate(other)) queue.insert(key(other));
       }
     }
@@ -198,8 +208,12 @@ ViewGraphCleaningResult CleanViewGraph(const std::vector<RelativeRotation>& edge
     if (!triangle.passes) ++report.num_failed_triangles;
     for (int e : triangle.edges) in_triangle[e] = true;
   }
+  std::vector<double> edge_weight(graph.NumEdges(), 1.0);
+  if (options.weigh_triangles) {
+    for (int g = 0; g < graph.NumEdges(); ++g) edge_weight[g] = edges[graph.input_edge[g]].weight;
+  }
   const std::vector<bool> dropped =
-      DropByTriangles(graph.NumEdges(), triangles, options.min_pass_fraction);
+      DropByTriangles(graph.NumEdges(), triangles, edge_weight, options.min_pass_fraction);
 
   std::vector<int> kept;
   std::vector<std::pair<int, int>> kept_pairs;

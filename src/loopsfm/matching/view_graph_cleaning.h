@@ -13,7 +13,10 @@
 //     min_pass_fraction of its remaining triangles. A drop removes the edge's triangles, so a
 //     good edge that shared failing triangles with outliers is judged on the rest.
 // A good edge is dropped only when outliers lie in all or most of its triangles. Edges in
-// no triangle are kept: nothing speaks against them.
+// no triangle are kept: nothing speaks against them. With weigh_triangles, steps 1 and 2
+// weigh each triangle by the weaker of its other two edges (the pairs' inliers) instead of
+// counting it: weak pairs that are off by the same rotation pass their triangles among
+// themselves and can outnumber a good pair of many inliers, not outweigh it.
 //
 //   ViewGraphCleaningResult cleaned = CleanViewGraph(edges, options);
 //   for (int e : cleaned.kept_edges) use(edges[e]);
@@ -30,6 +33,9 @@ struct ViewGraphCleaningOptions {
   // After step 1, an edge is dropped while fewer than this fraction of its remaining
   // triangles pass (step 2 above); in (0, 1].
   double min_pass_fraction = 0.5;
+  // Weigh what a triangle says about one of its edges by the weaker of its other two edges'
+  // weights (see above) instead of counting it.
+  bool weigh_triangles = false;
   // Keep only the largest connected component of the edges that survive.
   bool keep_largest_component = true;
   void Check() const;  // throws InvalidArgument

@@ -17,7 +17,8 @@ namespace loopsfm {
 // as their numbers; GlobalPositioningOptions::num_threads is left out (it changes rounding
 // only, and the mapper sets it).
 NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE(ViewGraphCleaningOptions, max_loop_error_deg,
-                                   min_pass_fraction, keep_largest_component)
+                                   min_pass_fraction, weigh_triangles,
+                                   keep_largest_component)
 NLOHMANN_DEFINE_TYPE_NON_INTRUSIVE(TwoViewVerificationOptions, max_error, confidence,
                                    max_num_trials, min_num_inliers, min_inlier_ratio,
                                    min_E_F_inlier_ratio, max_H_inlier_ratio,

@@ -9,11 +9,12 @@
 namespace loopsfm {
 
 struct GlobalMapperOptions {
-  // Stage 1: the view graph's edges that disagree around triangles go. Each connected
-  // component left with at least the mapper's min_model_size frames becomes a model of its
-  // own, largest first, up to its max_num_models (IncrementalMapperOptions); with
-  // view_graph.keep_largest_component, only the largest does.
-  ViewGraphCleaningOptions view_graph{.keep_largest_component = false};
+  // Stage 1: the view graph's edges that disagree around triangles go, what a triangle says
+  // weighed by its pairs' inliers. Each connected component left with at least the mapper's
+  // min_model_size frames becomes a model of its own, largest first, up to its
+  // max_num_models (IncrementalMapperOptions); with view_graph.keep_largest_component, only
+  // the largest does.
+  ViewGraphCleaningOptions view_graph{.weigh_triangles = true, .keep_largest_component = false};
   // The pairs' verification settings (its inlier threshold), for the poses of planar pairs
   // from their F.
   TwoViewVerificationOptions verification;
