@@ -241,7 +241,7 @@ std::vector<Reconstruction> MapGlobally(const MapperInput& mapper_input,
   report->stage_times.push_back(
       {"map: structure" + suffix, g.seconds_triangulation + g.seconds_bundles});
   if (g.num_pairs_across_cuts > 0) {
-    report->stage_times.push_back({"map: joining across cuts" + suffix, g.seconds_joining});
+    report->stage_times.push_back({"map: joining" + suffix, g.seconds_joining});
   }
   return models;
 }
