@@ -142,13 +142,16 @@ std::string IncrementalMapperSummary(const MapperReport& m) {
 
 std::string GlobalMapperSummary(const GlobalMapperReport& g, const MapperReport& m) {
   std::string out;
-  out += fmt::format("{:<28}{} edges ({} planar, {} with the homography's pose), {} dropped "
-                     "around triangles ({} nodes); {} connected component{}, {} mapped, {} "
-                     "frames in the others\n",
-                     "  view graph", g.num_view_graph_edges, g.num_planar_pairs,
-                     g.num_planar_poses_from_homography, g.view_graph.num_dropped_by_triangles,
+  out += fmt::format("{:<28}{} edges, {} dropped around triangles ({} nodes); {} connected "
+                     "component{}, {} mapped, {} frames in the others\n",
+                     "  view graph", g.num_view_graph_edges, g.view_graph.num_dropped_by_triangles,
                      g.view_graph.num_nodes, g.num_components, g.num_components == 1 ? "" : "s",
                      g.num_components_mapped, g.num_frames_in_other_components);
+  if (g.num_planar_pairs > 0) {
+    out += fmt::format("{:<28}{}, {} with the homography's pose, the others with F's (the one "
+                       "more triangles agree with)\n",
+                       "  planar pairs", g.num_planar_pairs, g.num_planar_poses_from_homography);
+  }
   if (g.num_cuts > 0) {
     out += fmt::format("{:<28}{} in the video (frames next to each other without a pair), {} "
                        "pairs across left out of the view graph{}\n",

@@ -99,12 +99,13 @@ std::vector<std::vector<RelativeRotation>> CleanedComponents(
   report->num_components = components.NumComponents();
   report->num_components_mapped = static_cast<int>(mapped.size());
   report->seconds_view_graph = timer.ElapsedSeconds();
-  spdlog::info("global mapper: view graph {} edges ({} planar, {} with the homography's pose; {} "
-               "cut{} in the video, {} pairs across left out), {} dropped around triangles; {} "
-               "connected component{}, {} mapped ({} frames in the others)",
-               edges.size(), report->num_planar_pairs, report->num_planar_poses_from_homography,
-               report->num_cuts, report->num_cuts == 1 ? "" : "s", report->num_pairs_across_cuts,
-               cleaned.report.num_dropped_by_triangles, report->num_components,
+  spdlog::info("global mapper: view graph {} edges ({} cut{} in the video, {} pairs across left "
+               "out; {} of {} planar pairs with the homography's pose), {} dropped around "
+               "triangles; {} connected component{}, {} mapped ({} frames in the others)",
+               edges.size(), report->num_cuts, report->num_cuts == 1 ? "" : "s",
+               report->num_pairs_across_cuts, report->num_planar_poses_from_homography,
+               report->num_planar_pairs, cleaned.report.num_dropped_by_triangles,
+               report->num_components,
                report->num_components == 1 ? "" : "s", report->num_components_mapped,
                report->num_frames_in_other_components);
   return mapped;
