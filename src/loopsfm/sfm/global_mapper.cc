@@ -21,26 +21,6 @@ namespace {
 
 using Rotations = std::map<image_t, Eigen::Quaterniond>;
 
-// The input's frames and cameras by id.
-class FrameLookup {
- public:
-  explicit FrameLookup(const MapperInput& input) {
-    for (const MapperFrame& frame : input.frames) {
-      capture_index_[frame.image_id] = static_cast<int>(frames_.size());
-      frames_[frame.image_id] = &frame;
-    }
-    for (const Camera& camera : input.cameras) cameras_[camera.camera_id] = &camera;
-  }
-  const MapperFrame& Frame(image_t id) const { return *frames_.at(id); }
-  int CaptureIndex(image_t id) const { return capture_index_.at(id); }
-  const Camera& CameraOf(image_t id) const { return *cameras_.at(Frame(id).camera_id); }
-
- private:
-  std::unordered_map<image_t, const MapperFrame*> frames_;
-  std::unordered_map<image_t, int> capture_index_;
-  std::unordered_map<camera_t, const Camera*> cameras_;
-};
-
 // The direction from camera 1's centre to camera 2's in the world: cam2_from_cam1 = (R, t)
 // puts camera 1's centre at t in camera 2, so c1 - c2 = R_2^T t.
 Eigen::Vector3d CentreDirection(const PairPose& pose, const Eigen::Quaterniond& cam2_from_world) {
@@ -363,7 +343,7 @@ class GlobalMapping {
 
   // Every verified pair's relative pose, found once (the view graph and positioning use it).
   const std::vector<PairPose>& VerifiedPairPoses() {
-    if (!pair_poses_) pair_poses_ = PairPoses(input_, options_, report_);
+    if (!pair_poses_) pair_poses_ = PairPoses(input_, lookup_, options_, report_);
     return *pair_poses_;
   }
 

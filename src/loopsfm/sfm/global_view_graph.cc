@@ -84,12 +84,16 @@ class CandidateGraph {
 
 }  // namespace
 
-std::vector<PairPose> PairPoses(const MapperInput& input, const GlobalMapperOptions& options,
-                                GlobalMapperReport* report) {
-  std::unordered_map<image_t, const MapperFrame*> frames;
-  for (const MapperFrame& frame : input.frames) frames[frame.image_id] = &frame;
-  std::unordered_map<camera_t, const Camera*> cameras;
-  for (const Camera& camera : input.cameras) cameras[camera.camera_id] = &camera;
+FrameLookup::FrameLookup(const MapperInput& input) {
+  for (const MapperFrame& frame : input.frames) {
+    capture_index_[frame.image_id] = static_cast<int>(frames_.size());
+    frames_[frame.image_id] = &frame;
+  }
+  for (const Camera& camera : input.cameras) cameras_[camera.camera_id] = &camera;
+}
+
+std::vector<PairPose> PairPoses(const MapperInput& input, const FrameLookup& lookup,
+                                const GlobalMapperOptions& options, GlobalMapperReport* report) {
 
   report->num_planar_pairs = report->num_planar_poses_from_homography = 0;
   std::vector<PairPose> poses;
@@ -100,10 +104,9 @@ std::vector<PairPose> PairPoses(const MapperInput& input, const GlobalMapperOpti
     const image_t id1 = pair.pair.image_id1, id2 = pair.pair.image_id2;
     std::vector<Rigid3d> candidates{geometry.cam2_from_cam1};
     if (geometry.config == TwoViewGeometry::kPlanar) {
-      const MapperFrame &frame1 = *frames.at(id1), &frame2 = *frames.at(id2);
       const std::optional<Rigid3d> essential = EssentialPoseOfPair(
-          *cameras.at(frame1.camera_id), frame1.points2D, *cameras.at(frame2.camera_id),
-          frame2.points2D, options.verification, geometry);
+          lookup.CameraOf(id1), lookup.Frame(id1).points2D, lookup.CameraOf(id2),
+          lookup.Frame(id2).points2D, options.verification, geometry);
       if (essential) {
         ++report->num_planar_pairs;
         candidates.insert(candidates.begin(), *essential);

@@ -15,9 +15,11 @@
 // long ones, whose two-view rotations can be far off, and rotation averaging has nothing
 // better to turn the two sides by.
 //
-//   const std::vector<PairPose> poses = PairPoses(input, options, &report);
+//   const FrameLookup lookup(input);
+//   const std::vector<PairPose> poses = PairPoses(input, lookup, options, &report);
 //   const std::vector<int> run = RunsBetweenCuts(input);  // per frame, in capture order
 
+#include <unordered_map>
 #include <vector>
 
 #include "loopsfm/geometry/rigid3.h"
@@ -26,6 +28,20 @@
 #include "loopsfm/sfm/mapper_input.h"
 
 namespace loopsfm {
+
+// The input's frames and cameras by id; it points into the input, which must outlive it.
+class FrameLookup {
+ public:
+  explicit FrameLookup(const MapperInput& input);
+  const MapperFrame& Frame(image_t id) const { return *frames_.at(id); }
+  int CaptureIndex(image_t id) const { return capture_index_.at(id); }
+  const Camera& CameraOf(image_t id) const { return *cameras_.at(Frame(id).camera_id); }
+
+ private:
+  std::unordered_map<image_t, const MapperFrame*> frames_;
+  std::unordered_map<image_t, int> capture_index_;
+  std::unordered_map<camera_t, const Camera*> cameras_;
+};
 
 // The relative pose of a verified pair, as the global mapper uses it.
 struct PairPose {
@@ -40,8 +56,8 @@ struct PairPose {
 // Every verified pair with a relative pose, in the input's order; a planar pair's as above
 // (with options.planar_pose_by_triangles; F's otherwise). The report gets the number of
 // planar pairs and of those that took the homography's pose.
-std::vector<PairPose> PairPoses(const MapperInput& input, const GlobalMapperOptions& options,
-                                GlobalMapperReport* report);
+std::vector<PairPose> PairPoses(const MapperInput& input, const FrameLookup& lookup,
+                                const GlobalMapperOptions& options, GlobalMapperReport* report);
 
 // For each frame of the input, in capture order, the index of its run: the frames between
 // two cuts (0 up to the first cut, and so on).

@@ -195,7 +195,7 @@ PlanarWalk WalkWithPlanarPair(bool f_is_right) {
 void ExpectPlanarPairPose(const MapperProblem& p, const GlobalMapperOptions& options,
                           const Rigid3d& expected, int from_homography) {
   GlobalMapperReport report = StaleReport();
-  const std::vector<PairPose> poses = PairPoses(p.input, options, &report);
+  const std::vector<PairPose> poses = PairPoses(p.input, FrameLookup(p.input), options, &report);
   ASSERT_EQ(poses.size(), p.input.pairs.size());
   ExpectPose(PoseOfFrames(poses, p, 1, 3).cam2_from_cam1, expected);
   EXPECT_TRUE(PoseOfFrames(poses, p, 1, 3).has_translation);
@@ -245,7 +245,8 @@ TEST(GlobalViewGraph, TrianglesVoteWithEitherCandidateOfTheirOtherPlanarPairs) {
     MakePlanar(&p, 0, 1, Wrong(truth01, Eigen::Vector3d(1, 0, 0)), truth01);
     MakePlanar(&p, planar, 2, Wrong(truth2, Eigen::Vector3d(0, 1, 0)), truth2);
     GlobalMapperReport report;
-    const std::vector<PairPose> poses = PairPoses(p.input, GlobalMapperOptions(), &report);
+    const std::vector<PairPose> poses = PairPoses(
+        p.input, FrameLookup(p.input), GlobalMapperOptions(), &report);
     ExpectPose(PoseOfFrames(poses, p, 0, 1).cam2_from_cam1, truth01);
     ExpectPose(PoseOfFrames(poses, p, planar, 2).cam2_from_cam1, truth2);
     EXPECT_EQ(report.num_planar_pairs, 2);
@@ -267,7 +268,8 @@ TEST(GlobalViewGraph, PairPosesKeepVerifiedPairsWithAPoseInOrder) {
   input.pairs.push_back(PairOf(6, 7, TwoViewGeometry::kPlanar, 50));
   for (MapperPair& pair : input.pairs) pair.geometry.cam2_from_cam1 = pose;
   GlobalMapperReport report = StaleReport();
-  const std::vector<PairPose> poses = PairPoses(input, GlobalMapperOptions(), &report);
+  const std::vector<PairPose> poses = PairPoses(
+      input, FrameLookup(input), GlobalMapperOptions(), &report);
   ASSERT_EQ(poses.size(), 3u);
   EXPECT_EQ(poses[0].image_id1, 1u);
   EXPECT_EQ(poses[0].image_id2, 2u);
