@@ -275,16 +275,19 @@ class IncrementalMapper {
   // Grows until nothing registers, merging with kept models it meets on the way and with
   // any kept model it shares tracks with at the end.
   void Grow(ModelPtr& model) {
+    bool merged = false;
     while (true) {
-      GrowUntilStalled(model);
-      bool merged = false;
+      GrowUntilStalled(model, /*refined=*/merged);
+      merged = false;
       for (size_t m = 0; m < models_.size() && !merged; ++m) merged = TryMerge(model, m);
       if (!merged) break;
     }
   }
 
-  void GrowUntilStalled(ModelPtr& model) {
-    if (!resume_growth_) growth_ = {{}, {}, model->reconstruction().NumRegImages(), {}, false};
+  // `refined`: the model has just been refined (a merge), so a stall before the next
+  // registration ends the growth without refining it again.
+  void GrowUntilStalled(ModelPtr& model, bool refined) {
+    if (!resume_growth_) growth_ = {{}, {}, model->reconstruction().NumRegImages(), {}, refined};
     resume_growth_ = false;
     while (true) {
       MaybeSaveCheckpoint(*model);
@@ -295,10 +298,7 @@ class IncrementalMapper {
       for (const auto& [near, count, image_id] : order) {
         if ((registered = TryRegister(model, image_id, count))) break;
       }
-      if (registered) {
-        growth_.refined_since_stall = false;
-        continue;
-      }
+      if (registered) continue;  // TryRegister says whether the model was refined since
       if (growth_.refined_since_stall) break;
       // Stalled: refine everything and give every frame another try.
       model->GlobalRefinement(&report_);
@@ -349,6 +349,7 @@ class IncrementalMapper {
       return false;
     }
     ++report_.num_registered;
+    refined_since_stall = false;
     failed_at.erase(image_id);
     if (ever_failed.erase(image_id)) ++report_.num_registered_on_retry;
     if (options_.global_ba_window > 0) {
@@ -378,6 +379,7 @@ class IncrementalMapper {
         TryMerge(model, owner)) {
       last_global_size = model->reconstruction().NumRegImages();
       failed_at.clear();
+      refined_since_stall = true;  // the merge refined the whole: a stall now needs no more
     }
     return true;
   }
@@ -427,6 +429,8 @@ class IncrementalMapper {
     size_t last_global_size = 0;
     // The frames registered most recently, oldest first (at most global_ba_window).
     std::vector<image_t> recent;
+    // The whole model was refined (at a stall, or by a merge) after its latest registration:
+    // a stall now ends the growth.
     bool refined_since_stall = false;
   };
 
