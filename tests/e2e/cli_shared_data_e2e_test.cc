@@ -86,6 +86,7 @@ TrajectoryMetrics MapGloballyAndScore(const fs::path& out, const fs::path& refer
   EXPECT_EQ(result.exit_code, 0) << result;
   EXPECT_FALSE(fs::exists(global / "sparse" / "1")) << "more than one model" << result;
   EXPECT_EQ(result.output.find("likely broken"), std::string::npos) << result;
+  EXPECT_EQ(result.output.find("likely bent"), std::string::npos) << result;
   if (!fs::exists(global / "sparse" / "0")) return {};
   const TrajectoryMetrics metrics =
       EvaluateTrajectory(ReadColmapModel(global / "sparse" / "0"), ReadTrajectoryFile(reference));

@@ -167,10 +167,20 @@ std::string GlobalMapperSummary(const GlobalMapperReport& g, const MapperReport&
                      "  rotation averaging", g.rotations.num_nodes, g.rotations.num_l1_iterations,
                      g.rotations.num_iterations, largest, g.num_rotation_outliers,
                      g.num_frames_without_edges);
-  out += fmt::format("{:<28}{} frames, {} points, {} observations, {} iterations{}{}\n",
-                     "  global positioning", g.positioning.num_cameras, g.positioning.num_points,
-                     g.positioning.num_observations, g.positioning.num_iterations, largest,
-                     g.positioning.success ? "" : " (failed: " + g.positioning.termination + ")");
+  const int num_observations = std::max(g.positioning.num_observations, 1);
+  const double off_deg = GlobalPositioningOptions().max_angle_error_deg;  // not a CLI option
+  out += fmt::format(
+      "{:<28}{} frames, {} points, {} observations ({:.1f} % more than {:.0f} deg off), {} "
+      "iterations{}{}{}\n",
+      "  global positioning", g.positioning.num_cameras, g.positioning.num_points,
+      g.positioning.num_observations,
+      100.0 * g.positioning.num_large_angle_observations / num_observations, off_deg,
+      g.positioning.num_iterations, largest,
+      g.positioning.success ? "" : " (failed: " + g.positioning.termination + ")",
+      g.num_bent_components > 0
+          ? fmt::format("; {} component{} likely bent (see the warning)", g.num_bent_components,
+                        g.num_bent_components == 1 ? "" : "s")
+          : "");
   out += fmt::format("{:<28}{} global BA {:.1f} s, triangulation {:.1f} s; {} of {} frames in "
                      "{} model{}, {} dropped for seeing too few points\n",
                      "  structure", m.num_global_ba, m.seconds_global_ba, g.seconds_triangulation,

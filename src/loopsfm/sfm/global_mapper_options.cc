@@ -36,6 +36,9 @@ void GlobalMapperOptions::Check() const {
   LOOPSFM_REQUIRE_OPTION(loose_settle_tolerance >= 0.0,
                          "global mapper loose_settle_tolerance must not be negative, got {}",
                          loose_settle_tolerance);
+  LOOPSFM_REQUIRE_OPTION(max_off_observation_fraction > 0.0 && max_off_observation_fraction <= 1.0,
+                         "global mapper max_off_observation_fraction must be in (0, 1], got {}",
+                         max_off_observation_fraction);
   LOOPSFM_REQUIRE_OPTION(max_step_ratio > 1.0,
                          "global mapper max_step_ratio must be above 1, got {}", max_step_ratio);
   LOOPSFM_REQUIRE_OPTION(min_frame_points >= 0,

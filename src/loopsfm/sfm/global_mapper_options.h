@@ -44,6 +44,12 @@ struct GlobalMapperOptions {
   int min_track_length = 3;
   int max_tracks_per_frame = 100;
   int max_observations_per_track = 10;
+  // A component whose positioning leaves more than max_off_observation_fraction of its
+  // observations further than positioning.max_angle_error_deg from the positions found is
+  // reported as likely bent: that many wrong matches (repeated structure, such as a street
+  // of identical buildings, gives them) bend positioning, and the bundles keep the bend
+  // (docs/global_mapper).
+  double max_off_observation_fraction = 0.12;
   // Also a term per verified pair with an essential matrix, the direction between its two
   // camera centres as the pair's relative pose gives it (GlobalPositioningOptions::
   // camera_direction_weight weighs it against one point observation).

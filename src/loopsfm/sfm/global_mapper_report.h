@@ -36,6 +36,9 @@ struct GlobalMapperReport {
   // the largest component's.
   int num_tracks_positioned = 0;
   GlobalPositioningReport positioning;
+  // Components whose positioning left more than GlobalMapperOptions::
+  // max_off_observation_fraction of their observations off: likely bent.
+  int num_bent_components = 0;
   // Frames dropped after the bundles for seeing too few points, in all models.
   int num_frames_dropped = 0;
   // Frames of the input, and in the models at the end.

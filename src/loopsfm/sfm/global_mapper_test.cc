@@ -289,6 +289,9 @@ TEST(GlobalMapper, OptionsAreChecked) {
   options = {};
   options.max_step_ratio = 1.0;
   EXPECT_THROW(options.Check(), InvalidArgument);
+  options = {};
+  options.max_off_observation_fraction = 0.0;
+  EXPECT_THROW(options.Check(), InvalidArgument);
   EXPECT_NO_THROW(GlobalMapperOptions().Check());
 }
 
@@ -320,6 +323,31 @@ TEST(GlobalMapper, PathJumpsAreReported) {
   EXPECT_EQ(report.num_broken_models, 1);
   EXPECT_EQ(report.largest_step_from, p.input.frames[19].name);
   EXPECT_EQ(report.largest_step_to, p.input.frames[20].name);
+}
+
+// Positioning that leaves many observations off (wrong matches, as repeated structure gives)
+// counts the component as likely bent; the same walk with its keypoints where they belong
+// does not.
+TEST(GlobalMapper, PositioningWithManyWrongObservationsIsReportedAsBent) {
+  MapperProblem p = NoisyWalkBack(0.3, 0);
+  GlobalMapperReport report;
+  RunGlobalMapper(p.input, OneThread(), GlobalMapperOptions(), &report, nullptr);
+  EXPECT_EQ(report.num_bent_components, 0);
+  EXPECT_LT(report.positioning.num_large_angle_observations,
+            0.02 * report.positioning.num_observations);
+
+  // Every third keypoint 50 px off (about 5 deg for this camera): a third of the tracks'
+  // observations point elsewhere.
+  for (MapperFrame& frame : p.input.frames) {
+    for (size_t k = 0; k < frame.points2D.size(); k += 3) {
+      frame.points2D[k] += Eigen::Vector2d(40.0, 30.0);
+    }
+  }
+  RunGlobalMapper(p.input, OneThread(), GlobalMapperOptions(), &report, nullptr);
+  EXPECT_EQ(report.num_bent_components, 1);
+  EXPECT_GT(report.positioning.num_large_angle_observations,
+            GlobalMapperOptions().max_off_observation_fraction *
+                report.positioning.num_observations);
 }
 
 }  // namespace
