@@ -1,7 +1,10 @@
 #include "loopsfm/pipeline/run_report.h"
 
+#include <algorithm>
 #include <chrono>
 #include <map>
+#include <string>
+#include <vector>
 
 #include <fmt/chrono.h>
 #include <fmt/format.h>
@@ -74,6 +77,31 @@ nlohmann::json TopView(const std::vector<TrajectoryEntry>& path,
   return view;
 }
 
+// The global mapper's warnings about its models, as the log gave them, for the summary.
+std::vector<std::string> GlobalMapperWarnings(const ReconstructReport& report) {
+  std::vector<std::string> warnings;
+  if (!report.global_mapper) return warnings;
+  const GlobalMapperReport& g = *report.global_mapper;
+  if (g.num_bent_components > 0) {
+    const int observations = std::max(g.positioning.num_observations, 1);
+    warnings.push_back(fmt::format(
+        "{} component{} likely bent: global positioning left many observations off (the "
+        "largest component: {:.1f} % more than {:.0f} deg), as the wrong matches of repeated "
+        "structure do; map with --mapper incremental",
+        g.num_bent_components, g.num_bent_components == 1 ? "" : "s",
+        100.0 * g.positioning.num_large_angle_observations / observations,
+        GlobalPositioningOptions().max_angle_error_deg));
+  }
+  if (g.num_broken_models > 0) {
+    warnings.push_back(fmt::format(
+        "{} model{} likely broken: a path jumps (model 0's largest step {:.0f}x the median, {} "
+        "to {}); map with --mapper incremental",
+        g.num_broken_models, g.num_broken_models == 1 ? "" : "s", g.largest_step_ratio,
+        g.largest_step_from, g.largest_step_to));
+  }
+  return warnings;
+}
+
 }  // namespace
 
 nlohmann::json RunReportData(const ReconstructReport& report,
@@ -97,6 +125,8 @@ nlohmann::json RunReportData(const ReconstructReport& report,
                      {"models", models.size()},
                      {"total_seconds", report.total_seconds},
                      {"peak_memory_mib", report.peak_memory_bytes / 1048576.0}};
+  const std::vector<std::string> warnings = GlobalMapperWarnings(report);
+  if (!warnings.empty()) data["summary"]["warnings"] = warnings;
   if (!report.output.models.empty()) {
     const ModelSummary& first = report.output.models[0];
     data["summary"]["points"] = first.num_points;

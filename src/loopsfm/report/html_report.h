@@ -9,8 +9,8 @@
 //
 // The data (every field optional; a section without data is left out):
 //   title, input, output, created                      strings
-//   summary     {frames, registered, models, points, mean_track_length,
-//                reprojection_error_px, total_seconds, peak_memory_mib}
+//   summary     {frames, registered, models, mapper, points, mean_track_length,
+//                reprojection_error_px, total_seconds, peak_memory_mib, warnings [text]}
 //   stages      [{name, seconds}]                      time per stage (bar chart)
 //   cameras     [{camera_id, model, width, height, params, focal_px, cx, cy}]
 //   frames      [{index, name, registered, model, camera_id, num_points2D, num_points3D,

@@ -29,6 +29,9 @@ function header(data) {
     meta ? el('p', { class: 'note' }, meta) : null);
   const row = el('div', { class: 'summary-row' }, summary);
   card.append(row);
+  for (const warning of Array.isArray(s.warnings) ? s.warnings : []) {
+    card.append(el('p', { class: 'warning' }, `warning: ${warning}`));
+  }
   const stages = (data.stages || []).filter((st) => isNumber(st.seconds));
   const canvas = stages.length ? stagesChart(row, stages) : null;
   return { card, stagesCanvas: canvas };

@@ -157,6 +157,10 @@ try {
     if (!shownTimeline.caption.startsWith(want)) fail(`keyframes caption "${shownTimeline.caption}", want "${want} ..."`);
   }
 
+  // The run mapped well: its summary carries no warning.
+  const runWarnings = await page.$$eval('#summary .warning', (ws) => ws.map((w) => w.textContent));
+  if (runWarnings.length) fail(`warnings in a good run's summary: ${JSON.stringify(runWarnings)}`);
+
   // Click a camera: the middle one of those in view.
   const indices = await page.evaluate(() => (window.LOOPSFM_REPORT.frames || [])
     .filter((f) => f.registered && (f.model ?? 0) === 0).map((f) => f.index));
@@ -191,7 +195,11 @@ try {
     Object.defineProperty(window, 'LOOPSFM_REPORT', {
       get: () => data,
       set: (full) => {
-        data = { title: full.title, frames: full.frames.map((f) => ({ index: f.index, registered: false })) };
+        data = {
+          title: full.title,
+          summary: { warnings: ['1 component likely bent (a made-up warning)'] },
+          frames: full.frames.map((f) => ({ index: f.index, registered: false })),
+        };
       },
     });
   });
@@ -200,8 +208,12 @@ try {
   const sparse = await page.evaluate(() => ({
     regions: window.loopsfmReport.regions(),
     sections: [...document.querySelectorAll('section')].map((s) => s.id),
+    warnings: [...document.querySelectorAll('#summary .warning')].map((w) => w.textContent),
   }));
-  console.log(`with little data: sections ${sparse.sections.join(', ')}`);
+  console.log(`with little data: sections ${sparse.sections.join(', ')}; warnings ${JSON.stringify(sparse.warnings)}`);
+  if (sparse.warnings.length !== 1 || !sparse.warnings[0].includes('likely bent (a made-up warning)')) {
+    fail(`the summary's warning is not shown: ${JSON.stringify(sparse.warnings)}`);
+  }
   if (sparse.sections.join(',') !== 'summary,per-frame' || sparse.regions.canvas3d || !sparse.regions.perFrame) {
     fail(`with little data, want the sections summary and per-frame only, got ${sparse.sections.join(', ')}`);
   }
