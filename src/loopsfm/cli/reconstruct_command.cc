@@ -167,14 +167,13 @@ std::string GlobalMapperSummary(const GlobalMapperReport& g, const MapperReport&
                      "  rotation averaging", g.rotations.num_nodes, g.rotations.num_l1_iterations,
                      g.rotations.num_iterations, largest, g.num_rotation_outliers,
                      g.num_frames_without_edges);
-  const int num_observations = std::max(g.positioning.num_observations, 1);
   const double off_deg = GlobalPositioningOptions().max_angle_error_deg;  // not a CLI option
   out += fmt::format(
       "{:<28}{} frames, {} points, {} observations ({:.1f} % more than {:.0f} deg off), {} "
       "iterations{}{}{}\n",
       "  global positioning", g.positioning.num_cameras, g.positioning.num_points,
       g.positioning.num_observations,
-      100.0 * g.positioning.num_large_angle_observations / num_observations, off_deg,
+      100.0 * g.positioning.LargeAngleFraction(), off_deg,
       g.positioning.num_iterations, largest,
       g.positioning.success ? "" : " (failed: " + g.positioning.termination + ")",
       g.num_bent_components > 0

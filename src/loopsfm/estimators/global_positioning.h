@@ -162,6 +162,12 @@ struct GlobalPositioningReport {
   int num_camera_directions = 0;
   // Used observations whose final angle exceeds max_angle_error_deg.
   int num_large_angle_observations = 0;
+  // num_large_angle_observations as a fraction of num_observations (0 without any).
+  double LargeAngleFraction() const {
+    return num_observations > 0
+               ? static_cast<double>(num_large_angle_observations) / num_observations
+               : 0.0;
+  }
   // Points moved by retriangulate_points (then solved once more).
   int num_retriangulated_points = 0;
   // Over both solves when points were moved; the initial cost is the first solve's.

@@ -1,6 +1,5 @@
 #include "loopsfm/pipeline/run_report.h"
 
-#include <algorithm>
 #include <chrono>
 #include <map>
 #include <string>
@@ -83,13 +82,12 @@ std::vector<std::string> GlobalMapperWarnings(const ReconstructReport& report) {
   if (!report.global_mapper) return warnings;
   const GlobalMapperReport& g = *report.global_mapper;
   if (g.num_bent_components > 0) {
-    const int observations = std::max(g.positioning.num_observations, 1);
     warnings.push_back(fmt::format(
         "{} component{} likely bent: global positioning left many observations off (the "
         "largest component: {:.1f} % more than {:.0f} deg), as the wrong matches of repeated "
         "structure do; map with --mapper incremental",
         g.num_bent_components, g.num_bent_components == 1 ? "" : "s",
-        100.0 * g.positioning.num_large_angle_observations / observations,
+        100.0 * g.positioning.LargeAngleFraction(),
         GlobalPositioningOptions().max_angle_error_deg));
   }
   if (g.num_broken_models > 0) {

@@ -271,16 +271,14 @@ std::optional<std::map<image_t, Rigid3d>> PositionComponent(
                positioned.camera_centres.size(), positioned.points.size(),
                positioned.report.num_observations, positioned.report.num_iterations, seconds,
                positioned.report.success ? "" : ": " + positioned.report.termination);
-  const int num_off = positioned.report.num_large_angle_observations;
-  const int num_observations = positioned.report.num_observations;
-  if (positioned.report.success &&
-      num_off > options.max_off_observation_fraction * num_observations) {
+  const double off = positioned.report.LargeAngleFraction();
+  if (positioned.report.success && off > options.max_off_observation_fraction) {
     ++report->num_bent_components;
     spdlog::warn("global mapper: global positioning of {} frames leaves {:.0f} % of its "
                  "observations more than {:.0f} deg off: many wrong matches, such as repeated "
                  "structure (identical buildings) gives; the path is likely bent, and the "
                  "bundles will not straighten it; map with --mapper incremental instead",
-                 rotations.size(), 100.0 * num_off / num_observations,
+                 rotations.size(), 100.0 * off,
                  positioning_options.max_angle_error_deg);
   }
   if (!positioned.report.success || positioned.camera_centres.size() < 2) {

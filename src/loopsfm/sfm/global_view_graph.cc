@@ -94,7 +94,6 @@ FrameLookup::FrameLookup(const MapperInput& input) {
 
 std::vector<PairPose> PairPoses(const MapperInput& input, const FrameLookup& lookup,
                                 const GlobalMapperOptions& options, GlobalMapperReport* report) {
-
   report->num_planar_pairs = report->num_planar_poses_from_homography = 0;
   std::vector<PairPose> poses;
   CandidateGraph graph;
