@@ -349,12 +349,23 @@ TEST_F(CliSyntheticTest, GlobalMapperMapsTheLoopWhole) {
   std::ifstream report(tmp / "report.html");
   const std::string html((std::istreambuf_iterator<char>(report)), std::istreambuf_iterator<char>());
   EXPECT_NE(html.find("\"mapper\":\"global\""), std::string::npos);
+  EXPECT_EQ(global.output.find("set aside"), std::string::npos)
+      << "a good global model was taken for a doubtful one" << global;
 
   std::vector<std::string> with_loop_closing = args;
   with_loop_closing.insert(with_loop_closing.end(), {"--loop-closing", "split"});
   const CommandResult refused = RunLoopsfm(with_loop_closing);
   EXPECT_EQ(refused.exit_code, 2) << refused;
   EXPECT_NE(refused.output.find("--loop-closing"), std::string::npos) << refused;
+  std::vector<std::string> keep_without_global = args;
+  keep_without_global.erase(std::find(keep_without_global.begin(), keep_without_global.end(),
+                                      "--mapper"),
+                            std::find(keep_without_global.begin(), keep_without_global.end(),
+                                      "--export"));
+  keep_without_global.push_back("--keep-global-model");
+  const CommandResult keep_refused = RunLoopsfm(keep_without_global);
+  EXPECT_EQ(keep_refused.exit_code, 2) << keep_refused;
+  EXPECT_NE(keep_refused.output.find("add --mapper global"), std::string::npos) << keep_refused;
 }
 
 // The same database mapped in three segments (the loop's two ends fall in the first and the

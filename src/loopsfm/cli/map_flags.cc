@@ -34,6 +34,11 @@ void AddMapFlags(CLI::App* cmd, MapFlags* flags) {
                       "loops are closed by the loop pairs in the view graph; checkpoints after "
                       "each stage")
           ->capture_default_str();
+  flags->keep_global_option = cmd->add_flag(
+      "--keep-global-model", flags->keep_global_model,
+      "With --mapper global: keep its model where it warns that the path is likely bent "
+      "(many wrong matches, as repeated structure gives) or broken (a jump in the path), "
+      "instead of setting it aside and mapping the video again with the incremental mapper");
   flags->loop_closing_option = cmd->add_option("--loop-closing", flags->loop_closing,
                   "posegraph: when the camera returns after drift, correct the map while mapping "
                   "(Sim3 pose graph, then the two ends' points are fused) | split: after "
@@ -94,10 +99,14 @@ void MapFlags::Resolve(ReconstructOptions* options) const {
       }
     }
     options->mapper_kind = MapperKind::kGlobal;
+    options->remap_doubtful_global = !keep_global_model;
   } else if (mapper != "incremental") {
     throw InvalidArgument(fmt::format("--mapper '{}' is not a mapper; use incremental (the "
                                       "default) or global",
                                       mapper));
+  } else if (keep_global_option->count() > 0) {
+    throw InvalidArgument("--keep-global-model is an option of the global mapper: add --mapper "
+                          "global, or leave it out");
   }
   if (segments > 1) {
     if (withhold_option->count() > 0) {

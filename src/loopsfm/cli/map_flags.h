@@ -16,6 +16,7 @@ struct MapFlags {
   std::string loop_closing = "posegraph";
   bool withhold_loop_pairs = false;
   bool alternate_poses = false;
+  bool keep_global_model = false;
   bool no_self_calibration = false;
   std::string refine;
   double checkpoint_every = 60.0;
@@ -29,6 +30,7 @@ struct MapFlags {
   CLI::Option* loop_closing_option = nullptr;
   CLI::Option* withhold_option = nullptr;
   CLI::Option* alternate_poses_option = nullptr;
+  CLI::Option* keep_global_option = nullptr;
   CLI::Option* segment_overlap_option = nullptr;
   // Sets the mapper, self-calibration, segment and output fields of `options` from the flags;
   // InvalidArgument for flags that do not go together.

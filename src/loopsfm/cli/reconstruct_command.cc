@@ -77,8 +77,16 @@ std::string SummaryText(const ReconstructReport& report) {
     out += fmt::format("{:<28}{:.1f} s\n", "time " + t.stage, t.seconds);
   }
   if (report.global_mapper) {
-    out += GlobalMapperSummary(*report.global_mapper, report.mapper);
-  } else {
+    out += GlobalMapperSummary(*report.global_mapper,
+                               report.global_mapper_set_aside.value_or(report.mapper));
+  }
+  if (report.global_mapper_set_aside) {
+    out += fmt::format("{:<28}the global mapper's path likely {}: the incremental mapper's "
+                       "model replaces it\n",
+                       "incremental mapper",
+                       report.global_mapper->num_bent_components > 0 ? "bent" : "broken");
+  }
+  if (!report.global_mapper || report.global_mapper_set_aside) {
     out += IncrementalMapperSummary(report.mapper);
   }
   if (report.segments) out += SegmentSummary(*report.segments);
@@ -206,7 +214,11 @@ std::string SegmentSummary(const SegmentMappingReport& s) {
                        segment.first_frame + segment.num_frames - 1, segment.num_registered,
                        segment.num_frames, segment.num_models, segment.num_models == 1 ? "" : "s",
                        segment.num_loops_closed, segment.num_loops_closed == 1 ? "" : "s",
-                       segment.seconds, segment.resumed ? " (from its checkpoint)" : "",
+                       segment.seconds,
+                       segment.resumed            ? " (from its checkpoint)"
+                       : segment.global_set_aside ? " (its global model set aside as doubtful, "
+                                                    "mapped incrementally)"
+                                                  : "",
                        k == 0             ? ""
                        : segment.merged ? fmt::format(
                                               "; merged into the one before ({} shared points "

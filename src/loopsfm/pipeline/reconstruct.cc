@@ -204,6 +204,8 @@ std::vector<Reconstruction> MapSegmented(const MapperInput& mapper_input,
   if (options.mapper_kind == MapperKind::kGlobal) {
     segments.global_mapper = options.global_mapper;
     segments.global_mapper->verification = options.match.verification;
+    segments.remap_doubtful_global = options.remap_doubtful_global;
+    segments.global_mapper->stop_when_bent = options.remap_doubtful_global;
   } else if (options.checkpoint_interval_seconds > 0.0) {
     segments.checkpoint_dir = checkpoint_dir;
     segments.checkpoint_interval_seconds = options.checkpoint_interval_seconds;
@@ -218,14 +220,42 @@ std::vector<Reconstruction> MapSegmented(const MapperInput& mapper_input,
   return models;
 }
 
+// The incremental mapper with loop closing; with checkpoints, in OUT/mapper_checkpoint.bin
+// (the fingerprint digests the whole mapper input: only with checkpoints).
+std::vector<Reconstruction> MapIncrementally(const MapperInput& mapper_input,
+                                             const ReconstructOptions& options,
+                                             const fs::path& checkpoint_path,
+                                             const std::string& stage, ReconstructReport* report) {
+  Timer timer;
+  std::optional<MapperCheckpointFile> checkpoint;
+  if (options.checkpoint_interval_seconds > 0.0) {
+    checkpoint.emplace(checkpoint_path, mapper_input, options.mapper,
+                       options.checkpoint_interval_seconds);
+  }
+  Progress progress("map", mapper_input.frames.size(), options.show_progress, options.hooks);
+  std::vector<Reconstruction> models =
+      MapWithLoopClosing(mapper_input, options.mapper, &report->mapper,
+                         [&](size_t registered, size_t) { progress.Set(registered); },
+                         checkpoint ? checkpoint->checkpointing() : MapperCheckpointing{});
+  report->stage_times.push_back({stage, timer.ElapsedSeconds()});
+  return models;
+}
+
 // The global mapper; with checkpoints, after each stage in OUT/global_mapper_checkpoint.bin.
+// Where it doubts its model (likely bent or broken) and options.remap_doubtful_global, the
+// incremental mapper maps the video again (its checkpoint: incremental_checkpoint_path).
 std::vector<Reconstruction> MapGlobally(const MapperInput& mapper_input,
                                         const ReconstructOptions& options,
-                                        const fs::path& checkpoint_path, int pass,
+                                        const fs::path& checkpoint_path,
+                                        const fs::path& incremental_checkpoint_path, int pass,
                                         ReconstructReport* report) {
   report->global_mapper.emplace();
+  report->global_mapper_set_aside.reset();
   GlobalMapperOptions global_options = options.global_mapper;
   global_options.verification = options.match.verification;
+  // A bent component is found before its bundles: when its model would be set aside, the
+  // bundles are not run.
+  global_options.stop_when_bent = options.remap_doubtful_global;
   std::optional<GlobalMapperCheckpointFile> checkpoint;
   if (options.checkpoint_interval_seconds > 0.0) {
     checkpoint.emplace(checkpoint_path, mapper_input, options.mapper, global_options);
@@ -243,7 +273,22 @@ std::vector<Reconstruction> MapGlobally(const MapperInput& mapper_input,
   if (g.num_pairs_across_cuts > 0) {
     report->stage_times.push_back({"map: joining" + suffix, g.seconds_joining});
   }
-  return models;
+  if (!g.Doubtful()) return models;
+  if (!options.remap_doubtful_global) {
+    spdlog::warn("global mapper: its model kept although likely {}, as --keep-global-model "
+                 "asks; --mapper incremental maps such a video without that fault",
+                 g.num_bent_components > 0 ? "bent" : "broken");
+    return models;
+  }
+  spdlog::warn("global mapper: likely {} (see the warning above); mapping the video with the "
+               "incremental mapper instead (--keep-global-model keeps the global mapper's "
+               "model)",
+               g.num_bent_components > 0 ? "bent" : "broken");
+  ThrowIfStopRequested(options.hooks, "global mapping");
+  report->global_mapper_set_aside = std::move(report->mapper);
+  report->mapper = {};
+  return MapIncrementally(mapper_input, options, incremental_checkpoint_path,
+                          "map: incremental" + suffix, report);
 }
 
 }  // namespace
@@ -290,19 +335,11 @@ void MapAndExport(Database& database, const fs::path& database_path, const fs::p
     if (options.segments.num_segments > 1) {
       models = MapSegmented(mapper_input, options, segment_checkpoints, pass, report);
     } else if (options.mapper_kind == MapperKind::kGlobal) {
-      models = MapGlobally(mapper_input, options, global_checkpoint_path, pass, report);
+      models = MapGlobally(mapper_input, options, global_checkpoint_path, checkpoint_path, pass,
+                           report);
     } else {
-      // The fingerprint digests the whole mapper input: only with checkpoints.
-      std::optional<MapperCheckpointFile> checkpoint;
-      if (options.checkpoint_interval_seconds > 0.0) {
-        checkpoint.emplace(checkpoint_path, mapper_input, options.mapper,
-                           options.checkpoint_interval_seconds);
-      }
-      Progress progress("map", mapper_input.frames.size(), options.show_progress, options.hooks);
-      models = MapWithLoopClosing(mapper_input, options.mapper, &report->mapper,
-                                  [&](size_t registered, size_t) { progress.Set(registered); },
-                                  checkpoint ? checkpoint->checkpointing() : MapperCheckpointing{});
-      report->stage_times.push_back({pass == 0 ? "map" : "map-again", stage.ElapsedSeconds()});
+      models = MapIncrementally(mapper_input, options, checkpoint_path,
+                                pass == 0 ? "map" : "map-again", report);
     }
     // Once per database: a rerun (which maps the fill-ins from the start) adds no more.
     if (pass > 0 || !adaptive || database.ReadMeta("fill_in_after_mapping")) break;

@@ -50,6 +50,11 @@ struct ReconstructOptions {
   MapperKind mapper_kind = MapperKind::kIncremental;
   IncrementalMapperOptions mapper;
   GlobalMapperOptions global_mapper;
+  // Where the global mapper warns that its model is likely bent or broken
+  // (GlobalMapperReport::Doubtful), set that model aside and map the video again with the
+  // incremental mapper (with loop closing and checkpoints as it would have alone); false:
+  // keep the global mapper's model, with its warning.
+  bool remap_doubtful_global = true;
   // The incremental mapper on segments of the video (segment_mapping.h) where
   // segments.num_segments > 1; checkpoints (checkpoint_interval_seconds) then go to
   // OUT/segments/, one per segment.
@@ -104,8 +109,11 @@ struct ReconstructReport {
   TrackBuildReport tracks;
   SelfCalibrationReport self_calibration;
   MapperReport mapper;
-  // With the global mapper: its stages.
+  // With the global mapper: its stages. Where its model was set aside as doubtful and the
+  // video mapped again (ReconstructOptions::remap_doubtful_global), the global mapper's own
+  // mapping report is global_mapper_set_aside, and `mapper` is the incremental mapper's.
   std::optional<GlobalMapperReport> global_mapper;
+  std::optional<MapperReport> global_mapper_set_aside;
   // With segments: each segment's mapping and the merge.
   std::optional<SegmentMappingReport> segments;
   // What the export wrote, with a summary of each model.

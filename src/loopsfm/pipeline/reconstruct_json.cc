@@ -60,6 +60,7 @@ nlohmann::json ToJson(const ReconstructReport& report) {
             {"num_dropped_matches", t.num_dropped_matches}}},
           {"self_calibration", ToJson(report.self_calibration)},
           {"mapper", report.global_mapper ? "global" : "incremental"},
+          {"global_model_set_aside", report.global_mapper_set_aside.has_value()},
           {"mapping", MapperReportJson(report.mapper)},
           {"models", models},
           {"written", written},

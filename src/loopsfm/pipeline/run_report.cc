@@ -81,21 +81,26 @@ std::vector<std::string> GlobalMapperWarnings(const ReconstructReport& report) {
   std::vector<std::string> warnings;
   if (!report.global_mapper) return warnings;
   const GlobalMapperReport& g = *report.global_mapper;
+  // Where the pipeline took the advice already, what it did instead.
+  const std::string advice = report.global_mapper_set_aside
+                                 ? "so the incremental mapper mapped the video instead, "
+                                   "and its model is the one shown"
+                                 : "map with --mapper incremental";
   if (g.num_bent_components > 0) {
     warnings.push_back(fmt::format(
         "{} component{} likely bent: global positioning left many observations off (the "
         "largest component: {:.1f} % more than {:.0f} deg), as the wrong matches of repeated "
-        "structure do; map with --mapper incremental",
+        "structure do; {}",
         g.num_bent_components, g.num_bent_components == 1 ? "" : "s",
         100.0 * g.positioning.LargeAngleFraction(),
-        GlobalPositioningOptions().max_angle_error_deg));
+        GlobalPositioningOptions().max_angle_error_deg, advice));
   }
   if (g.num_broken_models > 0) {
     warnings.push_back(fmt::format(
         "{} model{} likely broken: a path jumps (model 0's largest step {:.0f}x the median, {} "
-        "to {}); map with --mapper incremental",
+        "to {}); {}",
         g.num_broken_models, g.num_broken_models == 1 ? "" : "s", g.largest_step_ratio,
-        g.largest_step_from, g.largest_step_to));
+        g.largest_step_from, g.largest_step_to, advice));
   }
   return warnings;
 }
@@ -115,7 +120,10 @@ nlohmann::json RunReportData(const ReconstructReport& report,
   size_t registered = 0;
   for (const Reconstruction& model : models) registered += model.NumRegImages();
   const bool global = report.global_mapper || (report.segments && report.segments->global);
-  std::string mapper = global ? "global" : "incremental";
+  std::string mapper = !global                          ? "incremental"
+                       : report.global_mapper_set_aside ? "incremental (instead of the global "
+                                                          "mapper, see the warnings)"
+                                                        : "global";
   if (report.segments) mapper += fmt::format(", {} segments", report.segments->segments.size());
   data["summary"] = {{"frames", report.num_frames},
                      {"mapper", mapper},

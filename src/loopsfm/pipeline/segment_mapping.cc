@@ -64,17 +64,27 @@ struct SegmentResult {
   SegmentReport report;
 };
 
-// Maps a part of the input (a segment's frames), by the global mapper where `global` is set;
-// with a checkpoint path (the incremental mapper only), saves the mapping state there now and
-// then, and goes on from what is there.
+// Maps a part of the input (a segment's frames), by the global mapper where `global` is set
+// (and again by the incremental mapper where remap_doubtful and the global mapper doubts its
+// model); with a checkpoint path (the incremental mapper only), saves the mapping state
+// there now and then, and goes on from what is there.
 SegmentResult MapPart(const MapperInput& part, const IncrementalMapperOptions& options,
-                      const std::optional<GlobalMapperOptions>& global,
+                      const std::optional<GlobalMapperOptions>& global, bool remap_doubtful,
                       const fs::path& checkpoint_path, double checkpoint_interval_seconds) {
   Timer timer;
   SegmentResult result;
   std::vector<Reconstruction> models;
   if (global) {
-    models = RunGlobalMapper(part, options, *global, nullptr, &result.mapper_report);
+    GlobalMapperReport global_report;
+    models = RunGlobalMapper(part, options, *global, &global_report, &result.mapper_report);
+    result.report.global_set_aside = remap_doubtful && global_report.Doubtful();
+    if (result.report.global_set_aside) {
+      spdlog::warn("segment of {} frames: its global model set aside (likely {}); mapping it "
+                   "again with the incremental mapper",
+                   part.frames.size(), global_report.num_bent_components > 0 ? "bent" : "broken");
+      result.mapper_report = {};
+      models = MapWithLoopClosing(part, options, &result.mapper_report);
+    }
   } else {
     std::optional<MapperCheckpointFile> checkpoint;
     if (!checkpoint_path.empty()) {
@@ -166,13 +176,17 @@ std::vector<SegmentResult> MapSegments(const MapperInput& input,
   WorkSharing& sharing = own_sharing ? *own_sharing : *options.sharing;
   job.next = [&](size_t k) { return k < plan.size(); };
   job.compute = [&](size_t k) {
-    results[k] = MapPart(part_of(k), segment_options, options.global_mapper, checkpoint_of(k),
+    results[k] = MapPart(part_of(k), segment_options, options.global_mapper,
+                         options.remap_doubtful_global, checkpoint_of(k),
                          options.checkpoint_interval_seconds);
   };
   job.request = [&](size_t k, int, ByteWriter& request) {
     request.Put(segment_options);
     request.Put<uint8_t>(options.global_mapper ? 1 : 0);
-    if (options.global_mapper) request.Put(*options.global_mapper);
+    if (options.global_mapper) {
+      request.Put(*options.global_mapper);
+      request.Put<uint8_t>(options.remap_doubtful_global ? 1 : 0);
+    }
     request.PutString(checkpoint_of(k).string());
     request.Put(options.checkpoint_interval_seconds);
     PutMapperInput(request, part_of(k));
@@ -187,7 +201,10 @@ std::vector<SegmentResult> MapSegments(const MapperInput& input,
     report.num_frames = static_cast<int>(plan[k].second - plan[k].first);
     spdlog::info("segment of frames {}-{}: {} registered in its largest model of {}, {:.1f} s{}",
                  plan[k].first, plan[k].second - 1, report.num_registered, report.num_models,
-                 report.seconds, report.resumed ? " (from its checkpoint)" : "");
+                 report.seconds,
+                 report.resumed            ? " (from its checkpoint)"
+                 : report.global_set_aside ? " (its global model set aside, mapped incrementally)"
+                                           : "");
   };
   sharing.Run(job);
   LogRankShares("segments: segments", sharing.UnitsPerRank());
@@ -232,11 +249,16 @@ WorkHandler SegmentWorkHandler() {
   return [](ByteReader& request) {
     const auto options = request.Get<IncrementalMapperOptions>();
     std::optional<GlobalMapperOptions> global;
-    if (request.Get<uint8_t>()) global = request.Get<GlobalMapperOptions>();
+    bool remap_doubtful = false;
+    if (request.Get<uint8_t>()) {
+      global = request.Get<GlobalMapperOptions>();
+      remap_doubtful = request.Get<uint8_t>() != 0;
+    }
     const fs::path checkpoint = request.GetString();
     const auto checkpoint_interval_seconds = request.Get<double>();
     auto part = std::make_shared<const MapperInput>(GetMapperInput(request));
-    return [options, global, checkpoint, checkpoint_interval_seconds, part](ByteWriter& result) {
+    return [options, global, remap_doubtful, checkpoint, checkpoint_interval_seconds,
+            part](ByteWriter& result) {
       // On another machine the folder may not be there yet (no shared file system: the
       // checkpoint then stays on this machine, and a rerun maps the segment again).
       if (!checkpoint.empty()) {
@@ -244,7 +266,8 @@ WorkHandler SegmentWorkHandler() {
         fs::create_directories(checkpoint.parent_path(), ignored);
       }
       PutSegmentResult(result,
-                       MapPart(*part, options, global, checkpoint, checkpoint_interval_seconds));
+                       MapPart(*part, options, global, remap_doubtful, checkpoint,
+                               checkpoint_interval_seconds));
     };
   };
 }

@@ -51,6 +51,9 @@ struct SegmentMappingOptions {
   // incremental one (the merge, the frames a segment left out and the loops between segments
   // are still the incremental mapper's work). Such segments have no checkpoints.
   std::optional<GlobalMapperOptions> global_mapper;
+  // With global_mapper: a segment whose global model is doubtful (likely bent or broken,
+  // GlobalMapperReport::Doubtful) is mapped again by the incremental mapper; false: kept.
+  bool remap_doubtful_global = true;
   // The ranks of an MPI run to share the segments with (null: this process alone). The
   // checkpoint folder must then be one they all reach (a shared file system).
   WorkSharing* sharing = nullptr;
@@ -68,6 +71,8 @@ struct SegmentReport {
   double seconds = 0.0;
   // Taken from the checkpoint of a run before, which had finished it.
   bool resumed = false;
+  // Its global model was doubtful and set aside, and the incremental mapper mapped it.
+  bool global_set_aside = false;
   // Merged into the model of the segment before (false for the first, and where the merge
   // failed or this segment made no model).
   bool merged = false;

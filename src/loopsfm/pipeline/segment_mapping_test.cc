@@ -115,6 +115,37 @@ TEST(SegmentMapping, SegmentsMappedByTheGlobalMapperMergeIntoOneModel) {
   EXPECT_FALSE(std::filesystem::exists(dir));
 }
 
+// Segments whose global models are doubtful (a third of the keypoints 50 px off: positioning
+// leaves many observations off, as the wrong matches of repeated structure do) are set aside
+// and mapped again by the incremental mapper, unless remap_doubtful_global is off.
+TEST(SegmentMapping, DoubtfulGlobalSegmentsAreMappedAgainIncrementally) {
+  testing::MapperProblemOptions problem;
+  problem.num_frames = 40;
+  testing::MapperProblem p = testing::MakeMapperProblem(problem);
+  for (MapperFrame& frame : p.input.frames) {
+    for (size_t k = 0; k < frame.points2D.size(); k += 3) {
+      frame.points2D[k] += Eigen::Vector2d(40.0, 30.0);
+    }
+  }
+  SegmentMappingOptions options;
+  options.num_segments = 2;
+  options.overlap = 8;
+  options.global_mapper = GlobalMapperOptions();
+  for (const bool remap : {true, false}) {
+    options.remap_doubtful_global = remap;
+    SegmentMappingReport report;
+    MapperReport mapper_report;
+    const std::vector<Reconstruction> models =
+        MapInSegments(p.input, testing::LoopOptions(), options, &report, &mapper_report);
+    ASSERT_EQ(report.segments.size(), 2u);
+    for (const SegmentReport& segment : report.segments) {
+      EXPECT_EQ(segment.global_set_aside, remap) << "remap " << remap;
+      EXPECT_GT(segment.num_registered, segment.num_frames / 2) << "remap " << remap;
+    }
+    EXPECT_FALSE(models.empty());
+  }
+}
+
 // The same models whether the segments are mapped one at a time, all at once, or on other
 // ranks (each segment's mapping depends only on its frames and the options; a model comes
 // back from another rank bit for bit).

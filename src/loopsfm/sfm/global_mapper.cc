@@ -277,7 +277,7 @@ std::optional<std::map<image_t, Rigid3d>> PositionComponent(
     spdlog::warn("global mapper: global positioning of {} frames leaves {:.0f} % of its "
                  "observations more than {:.0f} deg off: many wrong matches, such as repeated "
                  "structure (identical buildings) gives; the path is likely bent, and the "
-                 "bundles will not straighten it; map with --mapper incremental instead",
+                 "bundles will not straighten it",
                  rotations.size(), 100.0 * off,
                  positioning_options.max_angle_error_deg);
   }
@@ -320,6 +320,7 @@ class GlobalMapping {
     ThrowIfStopRequested(hooks_, "global mapping (view graph)");
     std::vector<Reconstruction> models;
     for (size_t c = 0; c < progress_.components.size(); ++c) {
+      if (options_.stop_when_bent && report_->num_bent_components > 0) return {};
       std::optional<Reconstruction> model = MapComponent(c);
       if (model) models.push_back(std::move(*model));
     }
@@ -373,7 +374,7 @@ class GlobalMapping {
       std::optional<std::map<image_t, Rigid3d>> poses =
           PositionComponent(input_, lookup_, mapper_options_, options_, VerifiedPairPoses(),
                             *component.rotations, first, report_);
-      component.done = !poses;
+      component.done = !poses || (options_.stop_when_bent && report_->num_bent_components > 0);
       component.positioned = std::move(poses);
       Save();
       ThrowIfStopRequested(hooks_, "global mapping (positions)");
@@ -457,6 +458,10 @@ std::vector<Reconstruction> RunGlobalMapper(const MapperInput& input,
           .Run();
   if (report->num_pairs_across_cuts > 0 && !models.empty()) {
     models = JoinAcrossCuts(input, mapper_options, models, report, mapper_report);
+  }
+  if (options.stop_when_bent && report->num_bent_components > 0) {
+    spdlog::info("global mapper: stopped at a component likely bent; no model");
+    return {};
   }
   if (models.empty()) {
     spdlog::warn("global mapper: no part of the view graph could be mapped; no model");

@@ -50,6 +50,9 @@ struct GlobalMapperOptions {
   // of identical buildings, gives them) bend positioning, and the bundles keep the bend
   // (docs/global_mapper).
   double max_off_observation_fraction = 0.12;
+  // Stop at the first component found likely bent, before its bundles, with no model at all:
+  // for a caller that maps the video otherwise then (pipeline/reconstruct.h).
+  bool stop_when_bent = false;
   // Also a term per verified pair with an essential matrix, the direction between its two
   // camera centres as the pair's relative pose gives it (GlobalPositioningOptions::
   // camera_direction_weight weighs it against one point observation).

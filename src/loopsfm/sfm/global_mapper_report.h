@@ -58,6 +58,11 @@ struct GlobalMapperReport {
   double seconds_bundles = 0.0;
   // Joining the models mapped between cuts.
   double seconds_joining = 0.0;
+
+  // Whether a component was likely bent or a model likely broken: the models may be wrong
+  // as a whole although every local check passes (the pipeline then maps the video again
+  // with the incremental mapper, pipeline/reconstruct.h).
+  bool Doubtful() const { return num_bent_components > 0 || num_broken_models > 0; }
 };
 
 }  // namespace loopsfm

@@ -343,11 +343,20 @@ TEST(GlobalMapper, PositioningWithManyWrongObservationsIsReportedAsBent) {
       frame.points2D[k] += Eigen::Vector2d(40.0, 30.0);
     }
   }
-  RunGlobalMapper(p.input, OneThread(), GlobalMapperOptions(), &report, nullptr);
+  EXPECT_FALSE(
+      RunGlobalMapper(p.input, OneThread(), GlobalMapperOptions(), &report, nullptr).empty());
   EXPECT_EQ(report.num_bent_components, 1);
+  EXPECT_TRUE(report.Doubtful());
   EXPECT_GT(report.positioning.num_large_angle_observations,
             GlobalMapperOptions().max_off_observation_fraction *
                 report.positioning.num_observations);
+
+  // For a caller that maps a bent video otherwise: no bundles, no model.
+  GlobalMapperOptions stop;
+  stop.stop_when_bent = true;
+  EXPECT_TRUE(RunGlobalMapper(p.input, OneThread(), stop, &report, nullptr).empty());
+  EXPECT_EQ(report.num_bent_components, 1);
+  EXPECT_EQ(report.seconds_bundles, 0.0);
 }
 
 }  // namespace

@@ -111,7 +111,7 @@ void CheckPathJumps(const MapperInput& input, const std::vector<Reconstruction>&
     ++report->num_broken_models;
     spdlog::warn("global mapper: model {} is likely broken: its path jumps between {} and {} "
                  "by {:.0f} times its median step between frames (global positioning lost the "
-                 "scale between parts of the video); map with --mapper incremental instead",
+                 "scale between parts of the video)",
                  m, from, to, jump->ratio);
   }
 }
