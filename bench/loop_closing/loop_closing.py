@@ -105,6 +105,10 @@ def run_global_mapper(loopsfm, media, base):
          '--mapper', 'global', '--export', 'colmap'], out + '.log')
     seconds = sum(float(t) for t in
                   re.findall(r'^time map: .*?\s([\d.]+) s$', open(out + '.log').read(), re.M))
+    if re.search(r'^time map: incremental', open(out + '.log').read(), re.M):
+        print(f'the global mapper found its path likely bent or broken and handed the video to '
+              f'the incremental mapper: the global column is that mapper\'s model, in the time '
+              f'of both (see {out}.log)', file=sys.stderr)
     sparse = os.path.join(out, 'sparse')
     models = [os.path.join(sparse, d) for d in sorted(os.listdir(sparse))] if os.path.isdir(sparse) else []
     if not models:

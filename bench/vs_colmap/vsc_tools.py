@@ -337,6 +337,11 @@ def run_loopsfm_global_on_db(args, bench_set, run_dir, loopsfm_result):
     result["total_s"] = sum(front) if None not in front else None
     result.update(database_stats(db))
     result.update(evaluate(args, out_dir / "out" / "sparse", bench_set, out_dir / "eval.json"))
+    if "map: incremental" in stage_times:
+        # The global mapper found its path likely bent or broken: the model is the
+        # incremental mapper's, and the time both mappers'.
+        handed = "its path likely bent or broken, handed to the incremental mapper (both times)"
+        result["eval_note"] = "; ".join(n for n in (result.get("eval_note"), handed) if n)
     log(f"{bench_set.name}: loopsfm global mapper {proc['wall_s']:.1f} s, "
         f"{result['registered']}/{result['gt_frames']} registered")
     return result

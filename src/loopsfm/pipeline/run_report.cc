@@ -79,6 +79,16 @@ nlohmann::json TopView(const std::vector<TrajectoryEntry>& path,
 // The global mapper's warnings about its models, as the log gave them, for the summary.
 std::vector<std::string> GlobalMapperWarnings(const ReconstructReport& report) {
   std::vector<std::string> warnings;
+  if (report.segments) {
+    const std::vector<SegmentReport>& segments = report.segments->segments;
+    for (size_t k = 0; k < segments.size(); ++k) {
+      if (!segments[k].global_set_aside) continue;
+      warnings.push_back(fmt::format(
+          "segment {} (frames {}-{}): the global mapper found its path likely bent or broken "
+          "(see the log), so the incremental mapper mapped it instead",
+          k, segments[k].first_frame, segments[k].first_frame + segments[k].num_frames - 1));
+    }
+  }
   if (!report.global_mapper) return warnings;
   const GlobalMapperReport& g = *report.global_mapper;
   // Where the pipeline took the advice already, what it did instead.

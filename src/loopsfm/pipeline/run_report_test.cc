@@ -56,6 +56,35 @@ TEST(RunReport, GlobalMapperWarningsInTheSummary) {
   const std::string broken = data["summary"]["warnings"][1];
   EXPECT_NE(broken.find("2 models likely broken"), std::string::npos) << broken;
   EXPECT_NE(broken.find("80x the median, 0054.jpg to 0068.jpg"), std::string::npos) << broken;
+  EXPECT_NE(broken.find("map with --mapper incremental"), std::string::npos) << broken;
+  EXPECT_EQ(data["summary"]["mapper"], "global");
+
+  // Handed to the incremental mapper: the warnings say so instead of advising it.
+  report.global_mapper_set_aside = MapperReport{};
+  data = DataOf(report);
+  ASSERT_EQ(data["summary"]["warnings"].size(), 2u);
+  for (const std::string warning : data["summary"]["warnings"]) {
+    EXPECT_EQ(warning.find("map with --mapper incremental"), std::string::npos) << warning;
+    EXPECT_NE(warning.find("the incremental mapper mapped the video instead"), std::string::npos)
+        << warning;
+  }
+  EXPECT_NE(data["summary"]["mapper"].get<std::string>().find("incremental"), std::string::npos);
+}
+
+// Segments the global mapper doubted and the incremental mapper mapped again are named.
+TEST(RunReport, SegmentsHandedToTheIncrementalMapperInTheSummary) {
+  ReconstructReport report;
+  report.segments = SegmentMappingReport{};
+  report.segments->global = true;
+  report.segments->segments.resize(3);
+  report.segments->segments[1].first_frame = 40;
+  report.segments->segments[1].num_frames = 50;
+  EXPECT_FALSE(DataOf(report)["summary"].contains("warnings"));
+  report.segments->segments[1].global_set_aside = true;
+  const nlohmann::json data = DataOf(report);
+  ASSERT_EQ(data["summary"]["warnings"].size(), 1u);
+  const std::string warning = data["summary"]["warnings"][0];
+  EXPECT_NE(warning.find("segment 1 (frames 40-89)"), std::string::npos) << warning;
 }
 
 }  // namespace
