@@ -102,6 +102,14 @@ def collect(args, size):
     return result
 
 
+def stage_seconds(stages, stage):
+    """A stage's seconds from the run's `time` lines: its own line, or the sum of its parts
+    (the global mapper's `map: view graph`, `map: positions`, ...) and its second pass."""
+    parts = [t for name, t in stages.items()
+             if name == stage or name.startswith(stage + ": ") or name == stage + "-again"]
+    return sum(parts) if parts else None
+
+
 def report(results):
     rows = ["| video frames | kept | models | mapped | extract s | match s | map s | total s | "
             "peak MiB | ATE % path | rot. deg | loop gap max |",
@@ -109,7 +117,8 @@ def report(results):
     for r in results:
         s, m = r["stages"], r["mapped"]
         rows.append(f"| {r['video_frames']} | {r['kept']} | {r['models']} | {m.get('frames')} | "
-                    f"{fmt(s.get('extract'))} | {fmt(s.get('match'))} | {fmt(s.get('map'))} | "
+                    f"{fmt(stage_seconds(s, 'extract'))} | {fmt(stage_seconds(s, 'match'))} | "
+                    f"{fmt(stage_seconds(s, 'map'))} | "
                     f"{fmt(r['total_s'])} | {fmt(r['peak_mib'], 0)} | {fmt(m.get('ate_pct'), 4)} | "
                     f"{fmt(m.get('rot_deg'), 3)} | {fmt(m.get('gap_max'), 4)} |")
     xs = [r["video_frames"] for r in results]
@@ -117,7 +126,7 @@ def report(results):
             "peak memory": fit_exponent(xs, [r["peak_mib"] for r in results]),
             "kept frames": fit_exponent(xs, [r["kept"] for r in results])}
     for stage in STAGES:
-        times = [r["stages"].get(stage) for r in results]
+        times = [stage_seconds(r["stages"], stage) for r in results]
         if max((t or 0) for t in times) >= 1.0:  # a stage that took no time has no growth
             fits[stage] = fit_exponent(xs, times)
     lines = ["", "Fitted exponents (quantity ~ video frames^k):"]
