@@ -83,8 +83,7 @@ std::string SummaryText(const ReconstructReport& report) {
   if (report.global_mapper_set_aside) {
     out += fmt::format("{:<28}the global mapper's path likely {}: the incremental mapper's "
                        "model replaces it\n",
-                       "incremental mapper",
-                       report.global_mapper->num_bent_components > 0 ? "bent" : "broken");
+                       "incremental mapper", report.global_mapper->Fault());
   }
   if (!report.global_mapper || report.global_mapper_set_aside) {
     out += IncrementalMapperSummary(report.mapper);

@@ -277,13 +277,13 @@ std::vector<Reconstruction> MapGlobally(const MapperInput& mapper_input,
   if (!options.remap_doubtful_global) {
     spdlog::warn("global mapper: its model kept although likely {}, as --keep-global-model "
                  "asks; --mapper incremental maps such a video without that fault",
-                 g.num_bent_components > 0 ? "bent" : "broken");
+                 g.Fault());
     return models;
   }
   spdlog::warn("global mapper: likely {} (see the warning above); mapping the video with the "
                "incremental mapper instead (--keep-global-model keeps the global mapper's "
                "model)",
-               g.num_bent_components > 0 ? "bent" : "broken");
+               g.Fault());
   ThrowIfStopRequested(options.hooks, "global mapping");
   report->global_mapper_set_aside = std::move(report->mapper);
   report->mapper = {};

@@ -81,7 +81,7 @@ SegmentResult MapPart(const MapperInput& part, const IncrementalMapperOptions& o
     if (result.report.global_set_aside) {
       spdlog::warn("segment of {} frames: its global model set aside (likely {}); mapping it "
                    "again with the incremental mapper",
-                   part.frames.size(), global_report.num_bent_components > 0 ? "bent" : "broken");
+                   part.frames.size(), global_report.Fault());
       result.mapper_report = {};
       models = MapWithLoopClosing(part, options, &result.mapper_report);
     }

@@ -63,6 +63,9 @@ struct GlobalMapperReport {
   // as a whole although every local check passes (the pipeline then maps the video again
   // with the incremental mapper, pipeline/reconstruct.h).
   bool Doubtful() const { return num_bent_components > 0 || num_broken_models > 0; }
+  // What a doubtful run's messages call its fault: "bent" where a component was (found
+  // first, after positioning), else "broken".
+  const char* Fault() const { return num_bent_components > 0 ? "bent" : "broken"; }
 };
 
 }  // namespace loopsfm
