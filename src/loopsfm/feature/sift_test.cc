@@ -4,6 +4,7 @@
 
 #include <algorithm>
 
+#include <opencv2/features2d.hpp>
 #include <opencv2/imgproc.hpp>
 
 #include "loopsfm/util/errors.h"
@@ -60,6 +61,45 @@ TEST(Sift, MaxFeaturesKeepsTheStrongest) {
   options.max_features = 50;
   const FeatureSet features = ExtractSift(Texture(320, 240), options);
   EXPECT_EQ(features.Size(), 50u);
+}
+
+// The plain two-pass way: detect every keypoint, keep the strongest (ties in detection order),
+// then compute their descriptors on a second scale space.
+FeatureDescriptors TwoPassDescriptors(const cv::Mat& grey, const SiftOptions& options,
+                                      std::vector<cv::KeyPoint>* keypoints) {
+  auto sift = cv::SIFT::create(0, options.num_octave_layers, options.contrast_threshold,
+                               options.edge_threshold);
+  sift->detect(grey, *keypoints);
+  if (static_cast<int>(keypoints->size()) > options.max_features) {
+    std::stable_sort(keypoints->begin(), keypoints->end(),
+                     [](const cv::KeyPoint& a, const cv::KeyPoint& b) {
+                       return a.response > b.response;
+                     });
+    keypoints->resize(options.max_features);
+  }
+  cv::Mat descriptors;
+  sift->compute(grey, *keypoints, descriptors);
+  return QuantizeDescriptors(descriptors, options.root_sift);
+}
+
+TEST(Sift, OnePassEqualsDetectThenComputeWithAndWithoutTheCap) {
+  cv::Mat grey;
+  cv::cvtColor(Texture(320, 240), grey, cv::COLOR_BGR2GRAY);
+  for (int max_features : {100000, 300}) {
+    SiftOptions options;
+    options.max_features = max_features;
+    std::vector<cv::KeyPoint> expected_keypoints;
+    const FeatureDescriptors expected = TwoPassDescriptors(grey, options, &expected_keypoints);
+    const FeatureSet features = ExtractSift(grey, options);
+    ASSERT_EQ(features.Size(), expected_keypoints.size()) << max_features;
+    if (max_features == 300) ASSERT_EQ(features.Size(), 300u);
+    else ASSERT_GT(features.Size(), 300u);
+    for (size_t i = 0; i < features.Size(); ++i) {
+      EXPECT_FLOAT_EQ(features.keypoints[i].x, expected_keypoints[i].pt.x + 0.5f) << i;
+      EXPECT_FLOAT_EQ(features.keypoints[i].y, expected_keypoints[i].pt.y + 0.5f) << i;
+    }
+    EXPECT_TRUE(features.descriptors == expected) << max_features;
+  }
 }
 
 TEST(Sift, RootSiftDescriptorsHaveUnitNormBeforeQuantisation) {
