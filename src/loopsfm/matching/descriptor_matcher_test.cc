@@ -249,6 +249,27 @@ TEST(FindNearestNeighbors, EveryKernelIsExactWithAFewLargeBytes) {
   ExpectEveryKernelAgreesBothWays(d1, d2);
 }
 
+// Large bytes (128..255) at the same few places in rows and columns, in rows and columns of one
+// block and of several, next to rows and columns that have none: the AVX2 kernel splits the
+// rows' bytes above 127 off, and a kernel that split the columns' too would have to add back
+// where the two meet.
+TEST(FindNearestNeighbors, EveryKernelIsExactWhereLargeBytesMeet) {
+  Random random(29);
+  const std::vector<int> places = {0, 5, 6, 63, 64, 127};
+  auto bytes = [&](int n, int every) {
+    FeatureDescriptors d(n, kDescriptorDim);
+    for (int i = 0; i < n; ++i) {
+      for (int k = 0; k < kDescriptorDim; ++k) d(i, k) = static_cast<uint8_t>(random.UniformInt(0, 127));
+      if (i % every != 0) continue;
+      for (int p : places) {
+        if (random.UniformInt(0, 1) == 1) d(i, p) = static_cast<uint8_t>(random.UniformInt(128, 255));
+      }
+    }
+    return d;
+  };
+  ExpectEveryKernelAgreesBothWays(bytes(131, 2), bytes(77, 3));
+}
+
 TEST(MatchDescriptors, AgreesWithReferenceMatcher) {
   Random random(11);
   const PermutedSet set = MakePermutedSet(700, 500, 900, 0.05, random);
