@@ -164,6 +164,7 @@ std::vector<SegmentResult> MapSegments(const MapperInput& input,
   std::optional<WorkSharing> own_sharing;
   WorkSharing::Job job;
   job.kind = WorkKind::kMapSegment;
+  job.long_units = true;
   if (options.sharing && options.sharing->NumRanks() > 1) {
     // Each rank maps its share of the segments at once, on its threads.
     const int num_ranks = options.sharing->NumRanks();

@@ -98,16 +98,17 @@ class JobRun {
          const std::vector<int>& worker_threads, uint32_t serial)
       : job_(job), ranks_(ranks), serial_(serial), here_(num_threads) {
     const int num_ranks = ranks ? ranks->Size() : 1;
-    // Units in flight per rank: one per thread (or per threads_per_unit threads). Small
-    // units get one more waiting at another rank, so it never idles between a result and its
-    // next request; a large one waiting there could have started on a rank that is free.
+    // Units in flight per rank: one per thread (or per threads_per_unit threads), and one
+    // more waiting at each other rank for short units (Job::long_units). A unit that starts
+    // threads of its own counts as long.
     const int per_unit = std::max(1, job.threads_per_unit);
+    const int waiting = per_unit == 1 && !job.long_units ? 1 : 0;
     capacity_.assign(num_ranks, 0);
     in_flight_.assign(num_ranks, 0);
     units_per_rank_.assign(num_ranks, 0);
     capacity_[0] = std::max(1, num_threads / per_unit);
     for (int rank = 1; rank < num_ranks; ++rank) {
-      capacity_[rank] = std::max(1, worker_threads[rank] / per_unit) + (per_unit == 1 ? 1 : 0);
+      capacity_[rank] = std::max(1, worker_threads[rank] / per_unit) + waiting;
     }
     int total = 0;
     for (int c : capacity_) total += c;

@@ -36,6 +36,11 @@ class WorkSharing {
     // one that starts threads of its own (a segment's mapper), so a rank of T threads takes
     // T / threads_per_unit such units at once.
     int threads_per_unit = 1;
+    // Units long enough (a segment to map) that one waiting at a busy rank could have
+    // started on a rank that has come free: no rank is handed more than it starts at once.
+    // Short ones (a frame, a batch of pairs) get one more waiting at each other rank, so that
+    // rank never idles between a result and its next request.
+    bool long_units = false;
     // Makes unit i ready, on this thread, i = 0, 1, ... in turn; false when there is none.
     std::function<bool(size_t i)> next;
     // Whether unit i has anything to compute (a frame extracted before has not); when not,

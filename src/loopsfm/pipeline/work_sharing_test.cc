@@ -110,6 +110,24 @@ TEST(WorkSharing, ASlowRankTakesFewerUnits) {
   EXPECT_LT(2 * units[1], units[2]) << units[0] << " " << units[1] << " " << units[2];
 }
 
+// Three units, each 10x longer on rank 1 than here. Short units queue one more at rank 1,
+// which then holds two while this rank idles; long units (segments) go where a thread is free,
+// so this rank, done with its first, takes the third.
+TEST(WorkSharing, LongUnitsWaitForAFreeRankInsteadOfQueueingAtABusyOne) {
+  for (const bool long_units : {false, true}) {
+    SCOPED_TRACE(long_units ? "long units" : "short units");
+    auto ranks = InProcessRanks(2);
+    Workers workers(ranks, {Squarer(std::chrono::milliseconds(600))});
+    WorkSharing sharing(ranks[0].get(), 1);
+    SquaresJob squares(3, std::chrono::milliseconds(60));
+    squares.job.long_units = long_units;
+    sharing.Run(squares.job);
+    sharing.StopWorkers();
+    for (size_t i = 0; i < 3; ++i) EXPECT_EQ(squares.squares[i], int64_t(i * i));
+    EXPECT_EQ(sharing.UnitsPerRank(), (std::vector<size_t>{long_units ? 2u : 1u, long_units ? 1u : 2u}));
+  }
+}
+
 TEST(WorkSharing, UnitsWithoutWorkGoStraightToFinish) {
   auto ranks = InProcessRanks(2);
   Workers workers(ranks, {Squarer({})});
