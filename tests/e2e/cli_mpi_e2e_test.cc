@@ -140,10 +140,13 @@ TEST_F(CliMpiTest, AWrongCommandLineEndsEveryRank) {
 TEST_F(CliMpiTest, ARankThatDiesFailsTheRunAndTheRerunResumes) {
   if (!OnPath("sqlite3")) GTEST_SKIP() << "sqlite3 is not installed (scripts/setup installs it)";
   TempDir dir;
-  // Enough pairs that the run is still matching when the first are stored.
+  // Enough pairs that the run is still matching when the first are stored: the pairs are
+  // stored 512 at a time (256 a rank), and 120 frames make 7,140 pairs, 14 stores. With 40
+  // frames (780 pairs, two stores) the second took about 0.1 s, less than the killer
+  // needs on a busy machine, and the killed run had kept every pair.
   const CommandResult synth =
       RunLoopsfm({"-q", "synth", "cylinder", "--video", "-o", (dir / "scene").string(),
-                  "--frames", "40", "--width", "480", "--height", "360"});
+                  "--frames", "120", "--width", "480", "--height", "360"});
   ASSERT_EQ(synth.exit_code, 0) << synth;
   const fs::path db = dir / "killed.db", reference = dir / "reference.db";
   for (const fs::path& path : {db, reference}) {
