@@ -59,7 +59,12 @@ Reconstruction CloseLoopsAfterMapping(const MapperInput& input, const Reconstruc
   Reconstruction& rec = state.reconstruction();
   const std::vector<image_t> ordered = state.TakeFramesOf(model);
   if (ordered.size() < 2) return model;
-  for (image_t id : ordered) state.TriangulateImage(id);
+  // The model's points, where loop pairs cannot have joined their tracks to others (those
+  // are triangulated again, their loops' two ends getting points of their own where they
+  // disagree); then every track, for the observations left free and the points of one track
+  // that agree now.
+  state.TakePointsOf(model, options.loop_closure.min_frame_gap);
+  state.RetriangulateAll();
   const double seconds_triangulation = timer.ElapsedSeconds();
   report->seconds_triangulation += seconds_triangulation;
   const LoopClosureOptions& loop = options.loop_closure;

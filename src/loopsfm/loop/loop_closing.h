@@ -29,8 +29,9 @@ std::vector<Reconstruction> MapWithLoopClosing(const MapperInput& input,
 MapperInput WithoutLoopPairs(const MapperInput& input, int min_frame_gap);
 
 // Loop closing on a finished model, for loop pairs that come after mapping: the model's
-// frames and cameras are taken into a state over `input` (which holds the loop pairs), its
-// tracks are triangulated frame by frame in capture order (the two ends of a drifted loop
+// frames and cameras are taken into a state over `input` (which holds the loop pairs), with
+// its points where the loop pairs leave their tracks as they were (MapStructure::
+// TakePointsOf); the other tracks are triangulated again (the two ends of a drifted loop
 // get points of their own), the frames are offered to the loop closer in capture order, and
 // a global refinement ends it. With loop closing disabled only the triangulation and the
 // refinement run: what a global bundle adjustment makes of the loop pairs on its own.

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <map>
 
 #include "loopsfm/geometry/triangulation.h"
 #include "loopsfm/util/errors.h"
@@ -247,6 +248,49 @@ size_t MapStructure::RetriangulateAll() {
     MergePointsOfTrack(track);
   }
   return added;
+}
+
+size_t MapStructure::TakePointsOf(const Reconstruction& model, int min_joined_span) {
+  // First and last frame of a track or of observations, in capture order.
+  auto extent_of_track = [&](int track) {
+    const auto [low, high] = std::minmax_element(track_frames_.begin() + track_frame_begin_[track],
+                                                 track_frames_.begin() + track_frame_begin_[track + 1]);
+    return std::make_pair(*low, *high);
+  };
+  auto extent_of = [&](const std::vector<TrackElement>& elements) {
+    std::pair<int, int> extent{std::numeric_limits<int>::max(), -1};
+    for (const TrackElement& el : elements) {
+      const int index = capture_index_.at(el.image_id);
+      extent = {std::min(extent.first, index), std::max(extent.second, index)};
+    }
+    return extent;
+  };
+  size_t taken = 0;
+  std::map<int, std::vector<TrackElement>> by_track;
+  for (const point3D_t id : model.Point3DIds()) {  // id order: the same points however made
+    const Point3D& point = model.GetPoint3D(id);
+    by_track.clear();
+    for (const TrackElement& el : point.track.elements) {
+      const Image& image = reconstruction_.GetImage(el.image_id);
+      if (!image.registered || image.points2D[el.point2D_idx].HasPoint3D()) continue;
+      const int track = TrackOf(el.image_id, el.point2D_idx);
+      if (track >= 0) by_track[track].push_back(el);
+    }
+    const std::pair<const int, std::vector<TrackElement>>* largest = nullptr;
+    for (const auto& entry : by_track) {
+      if (!largest || entry.second.size() > largest->second.size()) largest = &entry;
+    }
+    if (!largest || largest->second.size() < 2) continue;
+    const auto [first, last] = extent_of_track(largest->first);
+    if (last - first >= min_joined_span && extent_of(largest->second) != std::make_pair(first, last)) {
+      continue;  // the track reaches frames far from the point's: pairs there may have joined it
+    }
+    Track track;
+    track.elements = largest->second;
+    reconstruction_.AddPoint3D(point.xyz, track, point.color);
+    ++taken;
+  }
+  return taken;
 }
 
 size_t MapStructure::RetriangulateFrames(const std::vector<image_t>& frames) {

@@ -45,6 +45,14 @@ class MapStructure {
   size_t RetriangulateAll();
   // Same over the tracks the registered frames among `frames` see.
   size_t RetriangulateFrames(const std::vector<image_t>& frames);
+  // Takes over the points of a model of the same frames whose poses are already here (made
+  // over another input of them, whose tracks may be parts of this input's). Each point keeps
+  // the observations of its largest share in one track of this input (at least two, on
+  // registered frames, keypoints with no point here yet). A track of this input that spans
+  // `min_joined_span` frames or more in capture order, beyond the frames of that share, may
+  // have been joined from parts (the loop pairs of CloseLoopsAfterMapping): its point is
+  // not taken. What is not taken stays free for triangulation. Returns the points taken.
+  size_t TakePointsOf(const Reconstruction& model, int min_joined_span);
   // One point from two points of the same track, placed where their observations meet best
   // even where some do not fit yet (a bundle and FilterPoints are to follow). Returns the new
   // point's id, or kInvalidPoint3DId (nothing changed) when the two are not of one track.

@@ -6,6 +6,7 @@
 #include <unordered_map>
 #include <unordered_set>
 
+#include "loopsfm/sfm/loop_test_problem.h"
 #include "loopsfm/sfm/sfm_test_problem.h"
 
 namespace loopsfm {
@@ -333,6 +334,59 @@ TEST(MapperState, WindowRefinementMovesOnlyTheWindowsFrames) {
     ASSERT_TRUE(rec.ExistsPoint3D(id));
     EXPECT_EQ(rec.GetPoint3D(id).xyz, xyz);
   }
+}
+
+// A model mapped without the loop pairs (its tracks end where the walk turns back) hands
+// its points to a state over every pair: a point is taken where its track is the same in
+// both, one of a track the loop pairs joined is not (the track is triangulated again), and
+// after RetriangulateAll the model has what a triangulation from scratch gives.
+TEST(MapperState, TakesThePointsOfAModelWhereTheLoopPairsLeftTheirTracksAlone) {
+  const MapperProblem p = testing::WalkOutAndBack();
+  const IncrementalMapperOptions options = testing::LoopOptions();
+  const int gap = options.loop_closure.min_frame_gap;
+  const MapperInput chain = InputPart(p.input, 0, p.input.frames.size(), gap);
+  ASSERT_LT(chain.pairs.size(), p.input.pairs.size());
+  MapperState mapped(chain, options);
+  RegisterAtTruth(p, mapped, 0, static_cast<int>(p.input.frames.size()));
+  const Reconstruction& model = mapped.reconstruction();
+
+  MapperState state(p.input, options);
+  ASSERT_EQ(state.TakeFramesOf(model).size(), p.input.frames.size());
+  const size_t taken = state.TakePointsOf(model, gap);
+  const Reconstruction& rec = state.reconstruction();
+  EXPECT_EQ(rec.NumPoints3D(), taken);
+  size_t joined_tracks = 0, points_of_joined = 0;
+  for (size_t t = 0; t < p.input.tracks.size(); ++t) {
+    // Joined: the model's points of the track's observations are of several chain tracks.
+    std::unordered_set<int> parts;
+    for (const TrackElement& el : p.input.tracks[t].elements) {
+      if (mapped.TrackOf(el.image_id, el.point2D_idx) >= 0) {
+        parts.insert(mapped.TrackOf(el.image_id, el.point2D_idx));
+      }
+    }
+    if (parts.size() < 2) continue;
+    ++joined_tracks;
+    points_of_joined += state.PointsOfTrack(static_cast<int>(t)).size();
+  }
+  EXPECT_GT(joined_tracks, 100u);
+  EXPECT_EQ(points_of_joined, 0u);
+  EXPECT_GT(taken, model.NumPoints3D() / 3);  // most tracks of this walk are joined
+  for (const point3D_t id : rec.Point3DIds()) {
+    const Point3D& point = rec.GetPoint3D(id);
+    for (const TrackElement& el : point.track.elements) {
+      EXPECT_EQ(state.TrackOf(el.image_id, el.point2D_idx), state.TrackOfPoint(point));
+      EXPECT_LE(state.ReprojectionErrorPx(point.xyz, el), options.max_reproj_error_px);
+    }
+  }
+
+  state.RetriangulateAll();
+  MapperState fresh(p.input, options);
+  fresh.TakeFramesOf(model);
+  fresh.RetriangulateAll();
+  const double observations = fresh.reconstruction().ComputeNumObservations();
+  EXPECT_GT(rec.ComputeNumObservations(), 0.98 * observations);
+  EXPECT_LT(rec.ComputeNumObservations(), 1.02 * observations);
+  EXPECT_LE(TracksWithSeveralPoints(state), TracksWithSeveralPoints(fresh) + 5);
 }
 
 }  // namespace
