@@ -6,6 +6,8 @@
 #include <memory>
 #include <optional>
 #include <thread>
+#include <unordered_map>
+#include <vector>
 
 #include "loopsfm/loop/loop_closing.h"
 #include "loopsfm/pipeline/mapper_checkpoint.h"
@@ -54,6 +56,58 @@ std::vector<std::pair<size_t, size_t>> PlanSegments(size_t num_frames, int num_s
     segments.push_back({begin, k + 1 == count ? num_frames : std::min(num_frames, begin + length)});
   }
   return segments;
+}
+
+std::vector<std::pair<size_t, size_t>> PlanSegmentsByCost(const std::vector<double>& frame_costs,
+                                                          int num_segments, int overlap) {
+  const size_t n = frame_costs.size();
+  const std::vector<std::pair<size_t, size_t>> equal = PlanSegments(n, num_segments, overlap);
+  std::vector<double> before(n + 1, 0.0);  // before[k]: the cost of frames [0, k)
+  for (size_t k = 0; k < n; ++k) before[k + 1] = before[k] + std::max(frame_costs[k], 0.0);
+  if (equal.size() < 2 || before[n] <= 0.0) return equal;
+  const size_t o = static_cast<size_t>(std::max(overlap, 0));
+  // Greedy: each segment as short as reaches `most` (and 2 * overlap frames), the next
+  // starting `overlap` frames before its end.
+  auto plan_under = [&](double most) {
+    std::vector<std::pair<size_t, size_t>> plan;
+    size_t begin = 0;
+    while (true) {
+      if (before[n] - before[begin] <= most) {
+        plan.push_back({begin, n});
+        break;
+      }
+      size_t end = std::lower_bound(before.begin() + begin + 1, before.end(),
+                                    before[begin] + most) - before.begin();
+      end = std::min(n, std::max(end, begin + 2 * o));
+      plan.push_back({begin, end});
+      if (end == n) break;
+      begin = end - o;
+    }
+    return plan;
+  };
+  // The plans for bounds from the mean cost of a segment up to all of it: the one of few
+  // enough segments, the last of 2 * overlap frames too, that costs least at its most costly
+  // segment. (Whether a bound admits a plan is not monotonic in it, which rules out a
+  // bisection; plans are cheap to make.)
+  auto most_of = [&](const std::vector<std::pair<size_t, size_t>>& plan) {
+    double most = 0.0;
+    for (const auto& [begin, end] : plan) most = std::max(most, before[end] - before[begin]);
+    return most;
+  };
+  std::vector<std::pair<size_t, size_t>> best = equal;
+  double best_most = most_of(equal);
+  constexpr int kSteps = 4096;
+  const double low = before[n] / static_cast<double>(equal.size());
+  for (int step = 0; step <= kSteps; ++step) {
+    const std::vector<std::pair<size_t, size_t>> plan =
+        plan_under(low + (before[n] - low) * step / kSteps);
+    if (plan.size() > equal.size() || plan.back().second - plan.back().first < 2 * o) continue;
+    if (const double most = most_of(plan); most < best_most) {
+      best = plan;
+      best_most = most;
+    }
+  }
+  return best;
 }
 
 namespace {
@@ -121,6 +175,17 @@ SegmentResult GetSegmentResult(ByteReader& r, const MapperInput& part) {
     result.model->RestoreMapped(GetMappedState(r));
   }
   return result;
+}
+
+// A frame's cost in mapping: its keypoints in tracks, by capture index.
+std::vector<double> TrackedKeypointsPerFrame(const MapperInput& input) {
+  std::unordered_map<image_t, size_t> index;
+  for (size_t k = 0; k < input.frames.size(); ++k) index[input.frames[k].image_id] = k;
+  std::vector<double> costs(input.frames.size(), 0.0);
+  for (const Track& track : input.tracks) {
+    for (const TrackElement& el : track.elements) costs[index.at(el.image_id)] += 1.0;
+  }
+  return costs;
 }
 
 // Stage 1: every segment mapped, as many at once as the ranks' threads allow (each segment
@@ -293,7 +358,7 @@ std::vector<Reconstruction> MapInSegments(const MapperInput& input,
   Timer timer;
   const std::vector<SegmentResult> results = MapSegments(
       input, mapper_options, options,
-      PlanSegments(input.frames.size(), options.num_segments, options.overlap));
+      PlanSegmentsByCost(TrackedKeypointsPerFrame(input), options.num_segments, options.overlap));
   for (const SegmentResult& result : results) {
     mapper_report->Add(result.mapper_report);
     report->segments.push_back(result.report);

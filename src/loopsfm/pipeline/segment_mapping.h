@@ -93,14 +93,21 @@ struct SegmentMappingReport {
   double seconds_loops = 0.0;
 };
 
-// The segments, as [begin, end) capture indices: num_segments of equal length (to one frame)
-// that share `overlap` frames with the next, covering the frames. Fewer when a segment would
-// have fewer than 2 * overlap frames (the log says so); one for num_segments 1.
 // A worker rank's part of MapInSegments: mapping the segments rank 0 sends.
 WorkHandler SegmentWorkHandler();
 
+// The segments, as [begin, end) capture indices: num_segments of equal length (to one frame)
+// that share `overlap` frames with the next, covering the frames. Fewer when a segment would
+// have fewer than 2 * overlap frames (the log says so); one for num_segments 1.
 std::vector<std::pair<size_t, size_t>> PlanSegments(size_t num_frames, int num_segments,
                                                     int overlap);
+// As many segments as PlanSegments(frame_costs.size(), ...) makes, sharing `overlap` frames
+// with the next, each of at least 2 * overlap frames, cut so that the most costly segment
+// costs as little as can be: the sum of its frames' costs, its overlaps included. With equal
+// costs, PlanSegments' segments. MapInSegments weighs a frame by its keypoints in tracks (a
+// segment's mapping time follows the observations its bundles hold).
+std::vector<std::pair<size_t, size_t>> PlanSegmentsByCost(const std::vector<double>& frame_costs,
+                                                          int num_segments, int overlap);
 
 // The models, largest first, as the incremental mapper's (at least min_model_size frames).
 // `mapper_report` gets every segment's counts and times (MapperReport::Add), then the loop

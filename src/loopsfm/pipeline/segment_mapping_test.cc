@@ -2,6 +2,8 @@
 
 #include <gtest/gtest.h>
 
+#include <numeric>
+
 #include <unistd.h>
 
 #include <filesystem>
@@ -31,6 +33,49 @@ TEST(PlanSegments, CoversTheFramesWithEqualSegmentsThatOverlap) {
   // Segments shorter than twice the overlap are not made: 40 frames give 3 of 20, not 4.
   EXPECT_EQ(PlanSegments(40, 4, 10), (Plan{{0, 20}, {10, 30}, {20, 40}}));
   EXPECT_EQ(PlanSegments(15, 4, 10), (Plan{{0, 15}}));
+}
+
+TEST(PlanSegments, ByCostCutsWhereTheSegmentsCostTheSame) {
+  // Equal costs: the equal segments.
+  for (const auto& [frames, count] : {std::pair{100, 4}, {100, 1}, {40, 4}, {15, 4}, {281, 4}}) {
+    EXPECT_EQ(PlanSegmentsByCost(std::vector<double>(frames, 1.0), count, 10),
+              PlanSegments(frames, count, 10))
+        << frames << " frames, " << count << " segments";
+  }
+  EXPECT_EQ(PlanSegmentsByCost({}, 4, 10), Plan{});
+  // The first 40 frames cost 3 each, the other 60 one each. Equal frames give segments that
+  // cost 99, 67, 33 and 31; by cost each costs 63: (0, 21), (11, 32), (22, 49), (39, 100).
+  // The segments still overlap by 10 frames and cover all.
+  std::vector<double> costs(100, 1.0);
+  std::fill(costs.begin(), costs.begin() + 40, 3.0);
+  auto cost_of = [&](const std::pair<size_t, size_t>& segment) {
+    return std::accumulate(costs.begin() + segment.first, costs.begin() + segment.second, 0.0);
+  };
+  auto most = [&](const Plan& plan) {
+    double m = 0.0;
+    for (const auto& segment : plan) m = std::max(m, cost_of(segment));
+    return m;
+  };
+  const Plan equal = PlanSegments(100, 4, 10);
+  const Plan by_cost = PlanSegmentsByCost(costs, 4, 10);
+  EXPECT_EQ(most(equal), 99.0);
+  EXPECT_EQ(by_cost, (Plan{{0, 21}, {11, 32}, {22, 49}, {39, 100}}));
+  for (const auto& segment : by_cost) EXPECT_EQ(cost_of(segment), 63.0);
+  EXPECT_EQ(by_cost.front().first, 0u);
+  EXPECT_EQ(by_cost.back().second, 100u);
+  for (size_t k = 0; k < by_cost.size(); ++k) {
+    EXPECT_GE(by_cost[k].second - by_cost[k].first, 20u);
+    if (k > 0) {
+      EXPECT_EQ(by_cost[k - 1].second - by_cost[k].first, 10u);
+    }
+  }
+  // Whatever the costs, a segment has at least twice the overlap: all the cost in the last
+  // frame leaves the others together.
+  std::vector<double> last(100, 0.0);
+  last.back() = 1.0;
+  for (const auto& segment : PlanSegmentsByCost(last, 4, 10)) {
+    EXPECT_GE(segment.second - segment.first, 20u);
+  }
 }
 
 TEST(SegmentMapping, OptionsAreChecked) {
