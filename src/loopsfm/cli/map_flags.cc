@@ -65,8 +65,8 @@ void AddMapFlags(CLI::App* cmd, MapFlags* flags) {
                   "result owes to chance. Matching keeps its own seed")
       ->capture_default_str();
   cmd->add_option("--segments", flags->segments,
-                  "Cut the frames into this many overlapping segments in capture order, map "
-                  "them at once (each with its share of --threads; under mpirun, on the "
+                  "Cut the frames into this many overlapping segments in capture order, of about "
+                  "equal cost (their keypoints in tracks), map them at once (each with its share of --threads; under mpirun, on the "
                   "processes) with the mapper of --mapper, merge them by their shared points, "
                   "then close the loops between them (Sim3 pose graph) and refine the whole; "
                   "--checkpoint-every saves each incremental segment to OUT/segments/, and a "
