@@ -115,6 +115,21 @@ double CalculateTriangulationAngle(const Eigen::Vector3d& center1, const Eigen::
   return AngleBetween(point3D_in_world - center1, point3D_in_world - center2);
 }
 
+bool SomeRaysApart(std::span<const Eigen::Vector3d> rays, double min_angle_rad) {
+  // The cosine decides where it is clearly on one side; atan2 where it is close.
+  const double cos_min = std::cos(min_angle_rad);
+  for (size_t i = 0; i < rays.size(); ++i) {
+    for (size_t j = rays.size() - 1; j > i; --j) {
+      const double cos_angle = rays[i].dot(rays[j]);
+      if (cos_angle < cos_min - 1e-9) return true;
+      if (cos_angle <= cos_min + 1e-9 && AngleBetween(rays[i], rays[j]) >= min_angle_rad) {
+        return true;
+      }
+    }
+  }
+  return false;
+}
+
 void TriangulationOptions::Check() const {
   LOOPSFM_REQUIRE_OPTION(num_refinement_iterations >= 0,
                          "triangulation: num_refinement_iterations must be >= 0, got {}",

@@ -35,6 +35,12 @@ std::optional<Eigen::Vector3d> TriangulateMultiView(
 double CalculateTriangulationAngle(const Eigen::Vector3d& center1, const Eigen::Vector3d& center2,
                                    const Eigen::Vector3d& point3D_in_world);
 
+// Whether some two of the rays (unit vectors from the projection centres to the point, in
+// the world frame) are at least min_angle_rad apart: the test TriangulateMultiViewChecked
+// makes of its widest pair, over every pair, stopping at the first wide enough (first and
+// last rays first: in capture order those are usually the widest).
+bool SomeRaysApart(std::span<const Eigen::Vector3d> rays, double min_angle_rad);
+
 struct TriangulationOptions {
   // Gauss-Newton steps on the reprojection error after the linear solution (0 = DLT only).
   int num_refinement_iterations = 3;

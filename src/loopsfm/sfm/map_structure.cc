@@ -77,6 +77,16 @@ bool MapStructure::ObservationFits(const Eigen::Vector3d& xyz, const TrackElemen
   return ReprojectionErrorPx(xyz, el) <= options_.max_reproj_error_px;
 }
 
+bool MapStructure::WideEnough(const Eigen::Vector3d& xyz,
+                              const std::vector<TrackElement>& elements) const {
+  std::vector<Eigen::Vector3d> rays;
+  rays.reserve(elements.size());
+  for (const TrackElement& el : elements) {
+    rays.push_back((xyz - reconstruction_.GetImage(el.image_id).ProjectionCenter()).normalized());
+  }
+  return SomeRaysApart(rays, options_.min_tri_angle_deg * M_PI / 180.0);
+}
+
 size_t MapStructure::TriangulateTrack(int track) {
   std::vector<TrackElement> free;
   size_t num_registered = 0;
@@ -168,7 +178,8 @@ size_t MapStructure::TriangulateNewPoints(std::vector<TrackElement> elements) {
     if (!result.success()) break;
     // The angular test is looser than the pixel one away from the image centre.
     std::erase_if(inliers, [&](const TrackElement& el) { return !ObservationFits(result.point3D_in_world, el); });
-    if (inliers.size() < 2) break;
+    // The angle was checked over more views than remain.
+    if (inliers.size() < 2 || !WideEnough(result.point3D_in_world, inliers)) break;
     Track track_in_model;
     track_in_model.elements = inliers;
     reconstruction_.AddPoint3D(result.point3D_in_world, track_in_model);
@@ -195,7 +206,7 @@ void MapStructure::MergePointsOfTrack(int track) {
         const bool all_fit = std::all_of(elements.begin(), elements.end(), [&](const TrackElement& el) {
           return ObservationFits(result.point3D_in_world, el);
         });
-        if (!all_fit) continue;
+        if (!all_fit || !WideEnough(result.point3D_in_world, elements)) continue;
         const point3D_t id = reconstruction_.MergePoints3D(points[a], points[b]);
         reconstruction_.GetPoint3D(id).xyz = result.point3D_in_world;
         merged = true;
@@ -317,7 +328,6 @@ size_t MapStructure::FilterPoints(const std::vector<point3D_t>& point_ids) {
     for (const auto& [id, point] : reconstruction_.Points3D()) ids.push_back(id);
   }
   size_t removed = 0;
-  const double min_angle = options_.min_tri_angle_deg * M_PI / 180.0;
   for (point3D_t id : ids) {
     if (!reconstruction_.ExistsPoint3D(id)) continue;
     const Point3D point = reconstruction_.GetPoint3D(id);
@@ -329,19 +339,9 @@ size_t MapStructure::FilterPoints(const std::vector<point3D_t>& point_ids) {
       }
     }
     if (!reconstruction_.ExistsPoint3D(id)) continue;
-    // Largest angle between viewing rays (checked over a bounded number of views).
-    const auto& elements = reconstruction_.GetPoint3D(id).track.elements;
-    const size_t n = std::min<size_t>(elements.size(), 30);
-    double best = 0.0;
-    for (size_t i = 0; i < n && best < min_angle; ++i) {
-      const Eigen::Vector3d ci = reconstruction_.GetImage(elements[i].image_id).ProjectionCenter();
-      for (size_t j = i + 1; j < n && best < min_angle; ++j) {
-        const Eigen::Vector3d cj = reconstruction_.GetImage(elements[j].image_id).ProjectionCenter();
-        best = std::max(best, CalculateTriangulationAngle(ci, cj, point.xyz));
-      }
-    }
-    if (best < min_angle) {
-      removed += elements.size();
+    const Point3D& kept = reconstruction_.GetPoint3D(id);
+    if (!WideEnough(kept.xyz, kept.track.elements)) {
+      removed += kept.track.elements.size();
       reconstruction_.DeletePoint3D(id);
     }
   }

@@ -92,6 +92,11 @@ class MapStructure {
   // or error bounds (where the point goes is all that is asked; callers check the fit).
   TriangulationReport PositionFromObservations(const std::vector<TrackElement>& elements) const;
   bool ObservationFits(const Eigen::Vector3d& xyz, const TrackElement& element) const;
+  // Whether two of the observations see a point there under options_.min_tri_angle_deg or
+  // more. Every point made, merged or kept passes this same test over all its observations,
+  // so FilterPoints never deletes, with the poses unchanged, a point triangulation has just
+  // made (which the next triangulation would then make again).
+  bool WideEnough(const Eigen::Vector3d& xyz, const std::vector<TrackElement>& elements) const;
   double MaxAngularErrorRad(camera_t camera_id) const;
 
   // track_of_[image_id][point2D_idx] = track index or -1.

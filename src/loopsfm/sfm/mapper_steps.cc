@@ -362,6 +362,8 @@ void MapperState::GlobalRefinement(MapperReport* report,
   const size_t removed = FilterPoints({});
   report->seconds_triangulation += tri_timer.ElapsedSeconds();
   const size_t observations = reconstruction_.ComputeNumObservations();
+  spdlog::debug("global refinement: {} observations added and {} removed after the bundle, "
+                "of {}", added, removed, observations);
   if (added + removed > 0.02 * observations) {
     GlobalBundle(report, scope);
     tri_timer.Restart();
