@@ -277,19 +277,49 @@ void BundleAdjuster::SetUp(Reconstruction* reconstruction) {
   centre_spread_ = spread > 0.0 ? spread : 1.0;  // one image, or all at one place
   for (const image_t image_id : image_ids) AddImage(image_id);
 
+  // Each point's observations by the config's images, in image order.
+  std::unordered_map<point3D_t, std::vector<Observation>> config_observations;
+  for (const image_t image_id : image_ids) {
+    const Image& image = reconstruction_->GetImage(image_id);
+    for (size_t idx = 0; idx < image.points2D.size(); ++idx) {
+      const Point2D& point2D = image.points2D[idx];
+      if (!point2D.HasPoint3D() || !config_.InPointSubset(point2D.point3D_id)) continue;
+      config_observations[point2D.point3D_id].push_back({image_id, static_cast<uint32_t>(idx)});
+    }
+  }
   // Points seen by the config's images, and those the config adds explicitly, enter with
   // their observations by the other registered images (poses constant there).
   std::unordered_set<point3D_t> variable_points;
-  for (const point3D_t id : points_added_) {
+  for (const auto& [id, observations] : config_observations) {
     if (!config_.HasConstantPoint(id)) variable_points.insert(id);
   }
   for (const point3D_t id : config_.VariablePoints()) {
     if (reconstruction_->ExistsPoint3D(id)) variable_points.insert(id);
   }
-  for (const point3D_t id : Sorted(variable_points)) AddPoint(id, /*constant=*/false);
-  for (const point3D_t id : Sorted(points_added_)) {
-    if (config_.HasConstantPoint(id)) {
-      problem_->SetParameterBlockConstant(reconstruction_->GetPoint3D(id).xyz.data());
+
+  // The residuals go in point by point, in the order Ceres' Schur solvers eliminate the
+  // points: by the number of variable poses a point shares residuals with, then in the
+  // order added. Ceres evaluates the residuals in that order on every iteration, so their
+  // cost functions lie in memory in the order they are read; added image by image, each
+  // evaluation fetched them from all over the heap (a quarter of a local bundle's time).
+  std::vector<std::pair<int, point3D_t>> order;
+  for (const auto& [id, observations] : config_observations) {
+    order.push_back({NumVariablePoses(observations), id});
+  }
+  for (const point3D_t id : variable_points) {
+    if (config_observations.count(id) == 0) order.push_back({0, id});
+  }
+  std::sort(order.begin(), order.end());
+  for (const auto& [degree, id] : order) {
+    Point3D& point = reconstruction_->GetPoint3D(id);
+    const auto it = config_observations.find(id);
+    if (it != config_observations.end()) {
+      points_added_.insert(id);
+      for (const Observation& observation : it->second) AddObservation(observation, &point);
+    }
+    if (variable_points.count(id) > 0) AddPoint(id, /*constant=*/false);
+    if (config_.HasConstantPoint(id) && problem_->HasParameterBlock(point.xyz.data())) {
+      problem_->SetParameterBlockConstant(point.xyz.data());
     }
   }
   ParameterizeCameras();
@@ -326,34 +356,39 @@ void BundleAdjuster::AddPoseBlocks(image_t image_id) {
 }
 
 void BundleAdjuster::AddImage(image_t image_id) {
-  Image& image = reconstruction_->GetImage(image_id);
+  const Image& image = reconstruction_->GetImage(image_id);
   LOOPSFM_CHECK_MSG(image.registered, "bundle adjustment: image {} is not registered", image_id);
-  Camera& camera = reconstruction_->GetCamera(image.camera_id);
+  const Camera& camera = reconstruction_->GetCamera(image.camera_id);
   LOOPSFM_CHECK_EQ(static_cast<int>(camera.params.size()), CameraModelNumParams(camera.model_id));
   config_cameras_.insert(image.camera_id);
   cameras_added_.insert(image.camera_id);
+  if (!config_.HasConstantPose(image_id)) AddPoseBlocks(image_id);
+}
 
-  const bool constant_pose = config_.HasConstantPose(image_id);
-  if (!constant_pose) AddPoseBlocks(image_id);
-  double* pose = PoseParameters(image.cam_from_world);
-
-  const bool constant_camera = IsCameraConstant(image.camera_id);
-  for (const Point2D& point2D : image.points2D) {
-    if (!point2D.HasPoint3D() || !config_.InPointSubset(point2D.point3D_id)) continue;
-    Point3D& point = reconstruction_->GetPoint3D(point2D.point3D_id);
-    points_added_.insert(point2D.point3D_id);
-    if (constant_pose) {
-      AddConstantPoseResidual(image, point2D.xy, &point);
-    } else if (constant_camera) {
-      problem_->AddResidualBlock(
-          CreateReprojectionErrorConstantCameraCost(camera.model_id, camera.params, point2D.xy),
-          loss_function_, pose, point.xyz.data());
-    } else {
-      problem_->AddResidualBlock(CreateReprojectionErrorCost(camera.model_id, point2D.xy),
-                                 loss_function_, pose, point.xyz.data(), camera.params.data());
-    }
-    ++report_.num_reprojection_residual_blocks;
+int BundleAdjuster::NumVariablePoses(const std::vector<Observation>& observations) const {
+  int count = 0;
+  for (const Observation& observation : observations) {
+    if (!config_.HasConstantPose(observation.image_id)) ++count;
   }
+  return count;
+}
+
+void BundleAdjuster::AddObservation(const Observation& observation, Point3D* point) {
+  Image& image = reconstruction_->GetImage(observation.image_id);
+  const Eigen::Vector2d& xy = image.points2D[observation.point2D_idx].xy;
+  Camera& camera = reconstruction_->GetCamera(image.camera_id);
+  if (config_.HasConstantPose(observation.image_id)) {
+    AddConstantPoseResidual(image, xy, point);
+  } else if (IsCameraConstant(image.camera_id)) {
+    problem_->AddResidualBlock(
+        CreateReprojectionErrorConstantCameraCost(camera.model_id, camera.params, xy),
+        loss_function_, PoseParameters(image.cam_from_world), point->xyz.data());
+  } else {
+    problem_->AddResidualBlock(CreateReprojectionErrorCost(camera.model_id, xy), loss_function_,
+                               PoseParameters(image.cam_from_world), point->xyz.data(),
+                               camera.params.data());
+  }
+  ++report_.num_reprojection_residual_blocks;
 }
 
 bool BundleAdjuster::IsCameraConstant(camera_t camera_id) const {

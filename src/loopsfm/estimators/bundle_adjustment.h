@@ -242,7 +242,16 @@ class BundleAdjuster {
   std::string FullReport() const { return summary_.FullReport(); }
 
  private:
+  // An observation of a point by an image of the config.
+  struct Observation {
+    image_t image_id;
+    uint32_t point2D_idx;
+  };
+  // An image of the config: its camera and, unless its pose is held constant, its pose block.
   void AddImage(image_t image_id);
+  // Of these observations, those by images whose pose is a variable block.
+  int NumVariablePoses(const std::vector<Observation>& observations) const;
+  void AddObservation(const Observation& observation, Point3D* point);
   void AddPoint(point3D_t point3D_id, bool constant);
   // The residual of an observation by an image whose pose is held constant.
   void AddConstantPoseResidual(const Image& image, const Eigen::Vector2d& observed,
