@@ -4,6 +4,7 @@
 #include <cmath>
 #include <optional>
 #include <thread>
+#include <tuple>
 
 #include <ceres/autodiff_cost_function.h>
 #include <ceres/manifold.h>
@@ -277,24 +278,52 @@ void BundleAdjuster::SetUp(Reconstruction* reconstruction) {
   centre_spread_ = spread > 0.0 ? spread : 1.0;  // one image, or all at one place
   for (const image_t image_id : image_ids) AddImage(image_id);
 
-  // Each point's observations by the config's images, in image order.
-  std::unordered_map<point3D_t, std::vector<Observation>> config_observations;
+  // The config's images' observations, grouped by point (in image order within a point).
+  std::vector<Observation> observations;
   for (const image_t image_id : image_ids) {
     const Image& image = reconstruction_->GetImage(image_id);
     for (size_t idx = 0; idx < image.points2D.size(); ++idx) {
       const Point2D& point2D = image.points2D[idx];
       if (!point2D.HasPoint3D() || !config_.InPointSubset(point2D.point3D_id)) continue;
-      config_observations[point2D.point3D_id].push_back({image_id, static_cast<uint32_t>(idx)});
+      observations.push_back({point2D.point3D_id, image_id, static_cast<uint32_t>(idx)});
     }
+  }
+  std::stable_sort(observations.begin(), observations.end(),
+                   [](const Observation& a, const Observation& b) {
+                     return a.point3D_id < b.point3D_id;
+                   });
+  // One entry per point: the number of variable poses it shares residuals with, its id, and
+  // its observations' range.
+  struct PointEntry {
+    int num_variable_poses;
+    point3D_t point3D_id;
+    size_t begin, end;
+  };
+  std::vector<PointEntry> points;
+  for (size_t begin = 0; begin < observations.size();) {
+    size_t end = begin;
+    int num_variable_poses = 0;
+    for (; end < observations.size() &&
+           observations[end].point3D_id == observations[begin].point3D_id;
+         ++end) {
+      if (!config_.HasConstantPose(observations[end].image_id)) ++num_variable_poses;
+    }
+    points.push_back({num_variable_poses, observations[begin].point3D_id, begin, end});
+    begin = end;
   }
   // Points seen by the config's images, and those the config adds explicitly, enter with
   // their observations by the other registered images (poses constant there).
   std::unordered_set<point3D_t> variable_points;
-  for (const auto& [id, observations] : config_observations) {
-    if (!config_.HasConstantPoint(id)) variable_points.insert(id);
+  for (const PointEntry& entry : points) {
+    if (!config_.HasConstantPoint(entry.point3D_id)) variable_points.insert(entry.point3D_id);
   }
-  for (const point3D_t id : config_.VariablePoints()) {
-    if (reconstruction_->ExistsPoint3D(id)) variable_points.insert(id);
+  for (const point3D_t id : Sorted(config_.VariablePoints())) {
+    if (!reconstruction_->ExistsPoint3D(id) || variable_points.count(id) > 0) continue;
+    const bool seen = std::binary_search(
+        observations.begin(), observations.end(), Observation{id, 0, 0},
+        [](const Observation& a, const Observation& b) { return a.point3D_id < b.point3D_id; });
+    if (!seen) points.push_back({0, id, 0, 0});
+    variable_points.insert(id);
   }
 
   // The residuals go in point by point, in the order Ceres' Schur solvers eliminate the
@@ -302,23 +331,17 @@ void BundleAdjuster::SetUp(Reconstruction* reconstruction) {
   // order added. Ceres evaluates the residuals in that order on every iteration, so their
   // cost functions lie in memory in the order they are read; added image by image, each
   // evaluation fetched them from all over the heap (a quarter of a local bundle's time).
-  std::vector<std::pair<int, point3D_t>> order;
-  for (const auto& [id, observations] : config_observations) {
-    order.push_back({NumVariablePoses(observations), id});
-  }
-  for (const point3D_t id : variable_points) {
-    if (config_observations.count(id) == 0) order.push_back({0, id});
-  }
-  std::sort(order.begin(), order.end());
-  for (const auto& [degree, id] : order) {
-    Point3D& point = reconstruction_->GetPoint3D(id);
-    const auto it = config_observations.find(id);
-    if (it != config_observations.end()) {
-      points_added_.insert(id);
-      for (const Observation& observation : it->second) AddObservation(observation, &point);
-    }
-    if (variable_points.count(id) > 0) AddPoint(id, /*constant=*/false);
-    if (config_.HasConstantPoint(id) && problem_->HasParameterBlock(point.xyz.data())) {
+  std::sort(points.begin(), points.end(), [](const PointEntry& a, const PointEntry& b) {
+    return std::tie(a.num_variable_poses, a.point3D_id) <
+           std::tie(b.num_variable_poses, b.point3D_id);
+  });
+  for (const PointEntry& entry : points) {
+    Point3D& point = reconstruction_->GetPoint3D(entry.point3D_id);
+    if (entry.begin < entry.end) points_added_.insert(entry.point3D_id);
+    for (size_t k = entry.begin; k < entry.end; ++k) AddObservation(observations[k], &point);
+    if (variable_points.count(entry.point3D_id) > 0) AddPoint(entry.point3D_id, /*constant=*/false);
+    if (config_.HasConstantPoint(entry.point3D_id) &&
+        problem_->HasParameterBlock(point.xyz.data())) {
       problem_->SetParameterBlockConstant(point.xyz.data());
     }
   }
@@ -363,14 +386,6 @@ void BundleAdjuster::AddImage(image_t image_id) {
   config_cameras_.insert(image.camera_id);
   cameras_added_.insert(image.camera_id);
   if (!config_.HasConstantPose(image_id)) AddPoseBlocks(image_id);
-}
-
-int BundleAdjuster::NumVariablePoses(const std::vector<Observation>& observations) const {
-  int count = 0;
-  for (const Observation& observation : observations) {
-    if (!config_.HasConstantPose(observation.image_id)) ++count;
-  }
-  return count;
 }
 
 void BundleAdjuster::AddObservation(const Observation& observation, Point3D* point) {

@@ -244,13 +244,12 @@ class BundleAdjuster {
  private:
   // An observation of a point by an image of the config.
   struct Observation {
+    point3D_t point3D_id;
     image_t image_id;
     uint32_t point2D_idx;
   };
   // An image of the config: its camera and, unless its pose is held constant, its pose block.
   void AddImage(image_t image_id);
-  // Of these observations, those by images whose pose is a variable block.
-  int NumVariablePoses(const std::vector<Observation>& observations) const;
   void AddObservation(const Observation& observation, Point3D* point);
   void AddPoint(point3D_t point3D_id, bool constant);
   // The residual of an observation by an image whose pose is held constant.
