@@ -288,10 +288,10 @@ void BundleAdjuster::SetUp(Reconstruction* reconstruction) {
       observations.push_back({point2D.point3D_id, image_id, static_cast<uint32_t>(idx)});
     }
   }
-  std::stable_sort(observations.begin(), observations.end(),
-                   [](const Observation& a, const Observation& b) {
-                     return a.point3D_id < b.point3D_id;
-                   });
+  const auto by_point = [](const Observation& a, const Observation& b) {
+    return a.point3D_id < b.point3D_id;
+  };
+  std::stable_sort(observations.begin(), observations.end(), by_point);
   // One entry per point: the number of variable poses it shares residuals with, its id, and
   // its observations' range.
   struct PointEntry {
@@ -317,11 +317,10 @@ void BundleAdjuster::SetUp(Reconstruction* reconstruction) {
   for (const PointEntry& entry : points) {
     if (!config_.HasConstantPoint(entry.point3D_id)) variable_points.insert(entry.point3D_id);
   }
-  for (const point3D_t id : Sorted(config_.VariablePoints())) {
+  for (const point3D_t id : config_.VariablePoints()) {
     if (!reconstruction_->ExistsPoint3D(id) || variable_points.count(id) > 0) continue;
-    const bool seen = std::binary_search(
-        observations.begin(), observations.end(), Observation{id, 0, 0},
-        [](const Observation& a, const Observation& b) { return a.point3D_id < b.point3D_id; });
+    const bool seen = std::binary_search(observations.begin(), observations.end(),
+                                         Observation{id, 0, 0}, by_point);
     if (!seen) points.push_back({0, id, 0, 0});
     variable_points.insert(id);
   }
