@@ -111,11 +111,11 @@ std::string IncrementalMapperSummary(const MapperReport& m) {
   out += fmt::format("{:<28}{} initial pairs tried ({} accepted), {} registered on a retry, {} "
                      "models merged, {} discarded, {} failed bundles, {} failed pose "
                      "refinements, {} poses against their neighbours in time ({} registered "
-                     "from the neighbours' points)\n",
+                     "from the neighbours' points, {} undone when a neighbour came later)\n",
                      "  mapper", m.num_init_trials, m.num_init_accepted, m.num_registered_on_retry,
                      m.num_models_merged, m.num_models_discarded, m.num_failed_bundles,
                      m.num_failed_pose_refinements, m.num_poses_against_neighbours,
-                     m.num_poses_from_neighbours);
+                     m.num_poses_from_neighbours, m.num_poses_undone_by_neighbours);
   out += fmt::format("{:<28}detection {:.1f} s, {} closed ({:.1f} s), {} refused as too large "
                      "for drift\n",
                      "  loop closing", m.seconds_loop_detection, m.loops_closed.size(),

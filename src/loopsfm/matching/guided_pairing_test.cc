@@ -210,6 +210,76 @@ TEST(GuidedPairing, SequentialPairsAreNotLoopPartnersAndResumingTriesNothing) {
   EXPECT_LE(resumed.num_tried, static_cast<size_t>(options.num_proposals)) << first.num_tried;
 }
 
+// A slow orbit: every frame sees the 20 frames on either side of it, so a vocabulary tree
+// scores that whole band high; frames 0-9 are seen again by frames 70-79 (a loop). The
+// sequential part verified i + 1..3, i + 8 and i + 16. Pairs whose frames share one of those
+// as a common neighbour are not proposed (their tracks join through it), so the band costs
+// little, while the loop is matched as before.
+TEST(GuidedPairing, PairsLinkedThroughASequentialNeighbourAreNotProposed) {
+  const int n = 80;
+  std::vector<image_t> ids(n);
+  for (int i = 0; i < n; ++i) ids[i] = static_cast<image_t>(i + 1);
+  auto truth = [](int a, int b) {
+    if (a > b) std::swap(a, b);
+    if (b - a <= 20) return true;
+    return a < 10 && b >= 70 && std::abs(a - (b - 70)) <= 3;
+  };
+  const Eigen::MatrixXf scores = ScoresFromTruth(n, truth, /*min_true_score=*/0.5, /*seed=*/6);
+  auto verify = [&](const std::vector<ImagePair>& pairs) {
+    std::vector<bool> ok;
+    for (const ImagePair& p : pairs) ok.push_back(truth(p.image_id1 - 1, p.image_id2 - 1));
+    return ok;
+  };
+  auto run = [&](bool skip_linked_pairs, IndexPairSet* tried, IndexPairSet* verified) {
+    *tried = IndexPairSet(n);
+    *verified = IndexPairSet(n);
+    IndexPairSet sequential(n);
+    for (int i = 0; i < n; ++i) {
+      for (int d : {1, 2, 3, 8, 16}) {
+        if (i + d >= n) continue;
+        for (IndexPairSet* set : {tried, verified, &sequential}) set->Insert(i, i + d);
+      }
+    }
+    GuidedPairingOptions options;
+    options.num_proposals = 20;
+    options.min_frame_gap = 3;
+    options.skip_linked_pairs = skip_linked_pairs;
+    return RunGuidedPairing(CandidatesFromMatrix(scores, kCandidates, options.min_frame_gap), ids,
+                            options, verify, tried, verified, &sequential);
+  };
+  IndexPairSet tried_all, verified_all, tried, verified;
+  const GuidedPairingReport all = run(false, &tried_all, &verified_all);
+  const GuidedPairingReport skipped = run(true, &tried, &verified);
+  // Linked: a common neighbour k at one of the sequential distances from both.
+  auto sequential_distance = [](int d) { return d <= 3 || d == 8 || d == 16; };
+  auto linked = [&](int a, int b) {
+    for (int k = 0; k < n; ++k) {
+      if (k != a && k != b && sequential_distance(std::abs(a - k)) &&
+          sequential_distance(std::abs(b - k))) {
+        return true;
+      }
+    }
+    return false;
+  };
+  for (const auto& [a, b] : tried.SortedPairs()) {
+    if (sequential_distance(b - a)) continue;
+    EXPECT_FALSE(linked(a, b)) << a << ", " << b;
+  }
+  // Without the rule the band's linked pairs are matched too.
+  int linked_tried_all = 0;
+  for (const auto& [a, b] : tried_all.SortedPairs()) {
+    linked_tried_all += !sequential_distance(b - a) && linked(a, b);
+  }
+  EXPECT_GT(linked_tried_all, 20);
+  EXPECT_LT(skipped.num_tried, all.num_tried);
+  // Every looping frame still gets a loop partner.
+  for (int a = 0; a < 10; ++a) {
+    int partners = 0;
+    for (int b = 70; b < n; ++b) partners += verified.Contains(a, b);
+    EXPECT_GE(partners, 1) << a;
+  }
+}
+
 TEST(GuidedPairing, RejectsBadOptions) {
   GuidedPairingOptions options;
   options.max_failure_ratio = 0;

@@ -139,7 +139,7 @@ TEST_F(GlobalMapperCheckpointTest, OtherInputOrOptionsSetTheCheckpointAside) {
   EXPECT_FALSE(ReadGlobalMapperCheckpoint(dir_ / "missing.bin", problem_.input, Fingerprint())
                    .has_value());
   const fs::path incremental = dir_ / "mapper_checkpoint.bin";
-  std::ofstream(incremental, std::ios::binary) << "loopsfm mapper checkpoint\n\x04";
+  std::ofstream(incremental, std::ios::binary) << "loopsfm mapper checkpoint\n\x05";
   EXPECT_FALSE(
       ReadGlobalMapperCheckpoint(incremental, problem_.input, Fingerprint()).has_value());
 }

@@ -15,7 +15,7 @@ namespace loopsfm {
 namespace fs = std::filesystem;
 namespace {
 
-const CheckpointFormat kFormat{"loopsfm mapper checkpoint\n", 4};
+const CheckpointFormat kFormat{"loopsfm mapper checkpoint\n", 5};
 
 // FNV-1a over the bytes of what mapping reads.
 class Digest {
@@ -176,7 +176,8 @@ nlohmann::json MapperReportJson(const MapperReport& r) {
                   r.num_local_ba, r.num_global_ba, r.num_local_ba_iterations,
                   r.num_local_ba_residuals, r.num_global_ba_iterations,
                   r.num_global_ba_residuals, r.num_failed_bundles, r.num_failed_pose_refinements,
-                  r.num_poses_against_neighbours, r.num_poses_from_neighbours, r.num_loops_refused,
+                  r.num_poses_against_neighbours, r.num_poses_from_neighbours,
+                  r.num_poses_undone_by_neighbours, r.num_loops_refused,
                   r.num_split_groups, r.num_split_groups_refused, r.num_split_pairs}},
       {"seconds", {r.seconds_registration, r.seconds_triangulation, r.seconds_local_ba,
                    r.seconds_global_ba, r.seconds_merging, r.seconds_loop_detection,
@@ -191,7 +192,7 @@ nlohmann::json MapperReportJson(const MapperReport& r) {
 MapperReport MapperReportFromJson(const nlohmann::json& j) {
   MapperReport r;
   const nlohmann::json& c = j.at("counts");
-  if (c.size() != 21) throw InputError("the report's counts are not 21 numbers");
+  if (c.size() != 22) throw InputError("the report's counts are not 22 numbers");
   int k = 0;
   for (int* field : {&r.num_models, &r.num_registered, &r.num_init_trials, &r.num_init_accepted,
                      &r.num_registered_on_retry, &r.num_models_merged, &r.num_models_discarded,
@@ -204,7 +205,7 @@ MapperReport MapperReportFromJson(const nlohmann::json& j) {
   }
   for (int* field : {&r.num_failed_bundles, &r.num_failed_pose_refinements,
                      &r.num_poses_against_neighbours, &r.num_poses_from_neighbours,
-                     &r.num_loops_refused, &r.num_split_groups,
+                     &r.num_poses_undone_by_neighbours, &r.num_loops_refused, &r.num_split_groups,
                      &r.num_split_groups_refused, &r.num_split_pairs}) {
     *field = GetInt<int>(c.at(k++));
   }

@@ -17,6 +17,7 @@ void MapperReport::Add(const MapperReport& other) {
   num_failed_bundles += other.num_failed_bundles;
   num_failed_pose_refinements += other.num_failed_pose_refinements;
   num_poses_against_neighbours += other.num_poses_against_neighbours;
+  num_poses_undone_by_neighbours += other.num_poses_undone_by_neighbours;
   num_poses_from_neighbours += other.num_poses_from_neighbours;
   seconds_registration += other.seconds_registration;
   seconds_triangulation += other.seconds_triangulation;

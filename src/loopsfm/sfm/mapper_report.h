@@ -71,6 +71,9 @@ struct MapperReport {
   // and those of them registered with a pose from the points those frames see.
   int num_poses_against_neighbours = 0;
   int num_poses_from_neighbours = 0;
+  // Registered frames deregistered when a later frame next to them showed their pose wrong
+  // (MapperState::UndoPosesAgainstNeighbours), to be registered again.
+  int num_poses_undone_by_neighbours = 0;
   double seconds_registration = 0.0;
   double seconds_triangulation = 0.0;
   double seconds_local_ba = 0.0;

@@ -67,6 +67,13 @@ class MapperState : public MapStructure {
   // that one disagrees too. Returns false, leaving the model unchanged, when too few
   // correspondences fit.
   bool RegisterImage(image_t image_id, Random& random, MapperReport* report);
+  // After `image_id` registered and triangulated: its registered partners within
+  // registration_neighbour_window frames in capture order whose pose now disagrees with what
+  // their nearest registered frames see (AgreementWithNeighbours) are deregistered, for the
+  // growth to register again, checked against those frames. Such a pose came from few
+  // correspondences, before the frames next to it were in the model (a frame of a weak
+  // stretch reached from far). The gauge frames stay. Returns the frames deregistered.
+  std::vector<image_t> UndoPosesAgainstNeighbours(image_t image_id, MapperReport* report);
   // Bundle over the image and the frames sharing most points with it, then filtering of
   // the points involved. Returns false when the solver failed (the model is unchanged).
   bool LocalBundle(image_t image_id, MapperReport* report);

@@ -299,6 +299,51 @@ TEST(MapperState, RegistrationKeepsToWhatTheFramesNextInTimeSee) {
                    .Disagrees());
 }
 
+// A frame registered on a wrong pose before the frames next to it in time (its few
+// correspondences then came from farther frames) goes back to the growth once those frames
+// register and show the pose wrong; frames whose pose fits stay.
+TEST(MapperState, APoseTheNeighboursLaterContradictIsUndone) {
+  MapperProblemOptions problem;
+  problem.num_frames = 20;
+  problem.overlap = 4;
+  const MapperProblem p = MakeMapperProblem(problem);
+  auto id = [&](int i) { return p.input.frames[i].image_id; };
+  for (const bool wrong : {false, true}) {
+    SCOPED_TRACE(wrong ? "wrong pose" : "true pose");
+    IncrementalMapperOptions options;
+    MapperState state(p.input, options);
+    RegisterAtTruth(p, state, 0, 10);
+    state.SetGauge(id(0), id(1));
+    // Frame 12 first, at its true pose or turned 60 degrees about its centre.
+    Rigid3d pose = p.cam_from_world[12];
+    if (wrong) {
+      const Eigen::Vector3d centre = pose.Inverse().translation;
+      pose.rotation = Eigen::Quaterniond(Eigen::AngleAxisd(M_PI / 3, Eigen::Vector3d::UnitY())) *
+                      pose.rotation;
+      pose.translation = -(pose.rotation * centre);
+    }
+    Reconstruction& rec = state.reconstruction();
+    rec.GetImage(id(12)).cam_from_world = pose;
+    rec.RegisterImage(id(12));
+    // Then frame 10, next to it (frame 9 was too far to judge it by).
+    RegisterAtTruth(p, state, 10, 11);
+    MapperReport report;
+    const size_t before = rec.NumRegImages();
+    const std::vector<image_t> undone = state.UndoPosesAgainstNeighbours(id(10), &report);
+    if (wrong) {
+      EXPECT_EQ(undone, std::vector<image_t>{id(12)});
+      EXPECT_FALSE(rec.IsRegistered(id(12)));
+      EXPECT_EQ(report.num_poses_undone_by_neighbours, 1);
+    } else {
+      EXPECT_TRUE(undone.empty());
+      EXPECT_TRUE(rec.IsRegistered(id(12)));
+      EXPECT_EQ(report.num_poses_undone_by_neighbours, 0);
+    }
+    for (int i = 0; i <= 10; ++i) EXPECT_TRUE(rec.IsRegistered(id(i))) << i;
+    EXPECT_EQ(rec.NumRegImages(), before - undone.size());
+  }
+}
+
 // A window refinement moves its frames and their points only: the frames behind it, the
 // points only they see, and the cameras stay exactly as they were, and they pull the
 // window's frames (moved off their poses here) back where they belong.

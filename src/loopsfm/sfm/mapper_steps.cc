@@ -175,6 +175,36 @@ bool MapperState::RegisterImage(image_t image_id, Random& random, MapperReport* 
   return true;
 }
 
+std::vector<image_t> MapperState::UndoPosesAgainstNeighbours(image_t image_id,
+                                                             MapperReport* report) {
+  std::vector<image_t> undone;
+  const int window = options_.registration_neighbour_window;
+  const auto pairs = pairs_of_.find(image_id);
+  if (window <= 0 || pairs == pairs_of_.end()) return undone;
+  Timer timer;
+  const int index = capture_index_.at(image_id);
+  for (const MapperPair* pair : pairs->second) {
+    const image_t other =
+        pair->pair.image_id1 == image_id ? pair->pair.image_id2 : pair->pair.image_id1;
+    if (std::abs(capture_index_.at(other) - index) > window || other == gauge1_ ||
+        other == gauge2_ || !reconstruction_.IsRegistered(other)) {
+      continue;
+    }
+    const NeighbourAgreement agreement = AgreementWithNeighbours(
+        other, reconstruction_.GetImage(other).cam_from_world, NeighbourCorrespondences(other));
+    if (!agreement.Disagrees()) continue;
+    spdlog::debug("{}: its pose fits {} of {} points of the frames next to it now that {} is "
+                  "registered; registered again later",
+                  reconstruction_.GetImage(other).name, agreement.num_fit, agreement.num_checked,
+                  reconstruction_.GetImage(image_id).name);
+    reconstruction_.DeRegisterImage(other);
+    undone.push_back(other);
+  }
+  report->num_poses_undone_by_neighbours += static_cast<int>(undone.size());
+  report->seconds_registration += timer.ElapsedSeconds();
+  return undone;
+}
+
 namespace {
 
 void FixGauge(const Reconstruction& reconstruction, image_t gauge1, image_t gauge2,
