@@ -79,22 +79,6 @@ GuidedPairingReport RunGuidedPairing(const std::vector<std::vector<ScoredIndex>>
     return std::abs(i - j) > options.min_frame_gap &&
            !(sequential != nullptr && sequential->Contains(i, j));
   };
-  // The sequential part's verified pairs, and whether two frames share one of them as a
-  // common neighbour.
-  IndexPairSet temporal(n);
-  if (sequential != nullptr && options.skip_linked_pairs) {
-    for (int i = 0; i < n; ++i) {
-      for (const int j : verified->Partners(i)) {
-        if (i < j && sequential->Contains(i, j)) temporal.Insert(i, j);
-      }
-    }
-  }
-  auto linked = [&](int i, int j) {
-    for (const int k : temporal.Partners(i)) {
-      if (temporal.Contains(k, j)) return true;
-    }
-    return false;
-  };
   std::vector<int> loop_partners(n, 0);
   for (int i = 0; i < n; ++i) {
     for (const int j : verified->Partners(i)) loop_partners[i] += is_loop_pair(i, j);
@@ -118,9 +102,7 @@ GuidedPairingReport RunGuidedPairing(const std::vector<std::vector<ScoredIndex>>
     auto propose = [&](int i, int j) {
       if (i == j || i < 0 || j < 0 || i >= n || j >= n) return false;
       if (i > j) std::swap(i, j);
-      if (tried->Contains(i, j) || proposed.Contains(i, j) || saturated(i, j) || linked(i, j)) {
-        return false;
-      }
+      if (tried->Contains(i, j) || proposed.Contains(i, j) || saturated(i, j)) return false;
       proposed.Insert(i, j);
       if (j - i > options.min_frame_gap) {
         ++pending[i];
@@ -140,9 +122,7 @@ GuidedPairingReport RunGuidedPairing(const std::vector<std::vector<ScoredIndex>>
     std::vector<IndexPair> best;
     for (size_t c = 0; c < ranked.size() && static_cast<int>(best.size()) < num_by_score; ++c) {
       const auto [i, j] = ranked[c];
-      if (tried->Contains(i, j) || proposed.Contains(i, j) || saturated(i, j) || linked(i, j)) {
-        continue;
-      }
+      if (tried->Contains(i, j) || proposed.Contains(i, j) || saturated(i, j)) continue;
       best.push_back(ranked[c]);
     }
     for (const IndexPair& p : best) stats.num_from_scores += propose(p.i, p.j);

@@ -16,8 +16,7 @@
 // every pair exhaustive matching verifies while matching fewer than a fixed k with the stop
 // rule on all proposals (docs/benchmarks.md, "Pairing"). Proposals by score skip pairs closer
 // in time than min_frame_gap (the sequential part has tried them), and no pair is proposed
-// whose two frames already have max_loop_partners loop partners each, nor one whose two frames
-// the sequential part already linked through a common neighbour (see skip_linked_pairs).
+// whose two frames already have max_loop_partners loop partners each.
 
 #include <functional>
 #include <vector>
@@ -40,12 +39,6 @@ struct GuidedPairingOptions {
   // loop band is thinned to a few pairs per frame instead of matched whole (0: no limit,
   // every pair region growing reaches is tried, for recall against exhaustive matching).
   int max_loop_partners = 5;
-  // Skip pairs (i, j) that share a sequential neighbour k: (i, k) and (k, j) both verified among
-  // the pairs the sequential part covered. Such frames see the same stretch of the path, their
-  // tracks already join through k, and they are not a loop (another pass links frames that no
-  // temporal chain this short joins). A slow orbit of an object otherwise fills its whole
-  // match matrix with these. Needs `sequential`.
-  bool skip_linked_pairs = true;
   // Stop proposing by score when more than this fraction of a round's score proposals fail.
   double max_failure_ratio = 0.7;
   // Safety bound on the number of rounds.
