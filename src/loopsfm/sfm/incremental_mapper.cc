@@ -348,10 +348,9 @@ class IncrementalMapper {
       ever_failed.insert(image_id);
       return false;
     }
-    // Frames next to this one registered before it on a wrong pose go back to the growth.
-    for (const image_t undone : model->UndoPosesAgainstNeighbours(image_id, &report_)) {
-      failed_at.erase(undone);
-    }
+    // Frames next to this one registered before it on a wrong pose go back to the growth
+    // (a registered frame has no entry in failed_at).
+    model->UndoPosesAgainstNeighbours(image_id, &report_);
     ++report_.num_registered;
     refined_since_stall = false;
     failed_at.erase(image_id);

@@ -59,15 +59,13 @@ bool MapperState::NearRegisteredFrame(image_t image_id, int window) const {
   return false;
 }
 
-std::vector<std::pair<point2D_t, point3D_t>> MapperState::NeighbourCorrespondences(
+std::vector<std::tuple<int, image_t, const MapperPair*>> MapperState::RegisteredPartnersNear(
     image_t image_id) const {
-  std::vector<std::pair<point2D_t, point3D_t>> correspondences;
+  std::vector<std::tuple<int, image_t, const MapperPair*>> near;
   const int window = options_.registration_neighbour_window;
   const auto pairs = pairs_of_.find(image_id);
-  if (window <= 0 || pairs == pairs_of_.end()) return correspondences;
+  if (window <= 0 || pairs == pairs_of_.end()) return near;
   const int index = capture_index_.at(image_id);
-  // (distance in capture order, other frame, pair) of registered frames within the window.
-  std::vector<std::tuple<int, image_t, const MapperPair*>> near;
   for (const MapperPair* pair : pairs->second) {
     const image_t other =
         pair->pair.image_id1 == image_id ? pair->pair.image_id2 : pair->pair.image_id1;
@@ -76,6 +74,13 @@ std::vector<std::pair<point2D_t, point3D_t>> MapperState::NeighbourCorrespondenc
       near.push_back({distance, other, pair});
     }
   }
+  return near;
+}
+
+std::vector<std::pair<point2D_t, point3D_t>> MapperState::NeighbourCorrespondences(
+    image_t image_id) const {
+  std::vector<std::pair<point2D_t, point3D_t>> correspondences;
+  std::vector<std::tuple<int, image_t, const MapperPair*>> near = RegisteredPartnersNear(image_id);
   std::sort(near.begin(), near.end());
   if (near.size() > 2) near.resize(2);
   for (const auto& [distance, other, pair] : near) {

@@ -4,6 +4,7 @@
 
 #include <functional>
 #include <optional>
+#include <tuple>
 #include <unordered_map>
 #include <unordered_set>
 #include <vector>
@@ -121,6 +122,10 @@ class MapperState : public MapStructure {
   std::unordered_set<point3D_t> LongestTrackPoints(int per_frame) const;
 
  private:
+  // (distance in capture order, other frame, pair) of the image's verified pairs with
+  // registered frames within registration_neighbour_window frames of it, in pair order.
+  std::vector<std::tuple<int, image_t, const MapperPair*>> RegisteredPartnersNear(
+      image_t image_id) const;
   // The frame whose centre holds the scale in global bundles: the one farthest from gauge1_.
   image_t ScaleGaugeImage() const;
   // A whole-model bundle's cameras: constant, or refined as options_ ask (by the model's size).

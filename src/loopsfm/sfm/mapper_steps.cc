@@ -177,19 +177,10 @@ bool MapperState::RegisterImage(image_t image_id, Random& random, MapperReport* 
 
 std::vector<image_t> MapperState::UndoPosesAgainstNeighbours(image_t image_id,
                                                              MapperReport* report) {
-  std::vector<image_t> undone;
-  const int window = options_.registration_neighbour_window;
-  const auto pairs = pairs_of_.find(image_id);
-  if (window <= 0 || pairs == pairs_of_.end()) return undone;
   Timer timer;
-  const int index = capture_index_.at(image_id);
-  for (const MapperPair* pair : pairs->second) {
-    const image_t other =
-        pair->pair.image_id1 == image_id ? pair->pair.image_id2 : pair->pair.image_id1;
-    if (std::abs(capture_index_.at(other) - index) > window || other == gauge1_ ||
-        other == gauge2_ || !reconstruction_.IsRegistered(other)) {
-      continue;
-    }
+  std::vector<image_t> undone;
+  for (const auto& [distance, other, pair] : RegisteredPartnersNear(image_id)) {
+    if (other == gauge1_ || other == gauge2_) continue;
     const NeighbourAgreement agreement = AgreementWithNeighbours(
         other, reconstruction_.GetImage(other).cam_from_world, NeighbourCorrespondences(other));
     if (!agreement.Disagrees()) continue;
